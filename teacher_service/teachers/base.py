@@ -4,10 +4,18 @@ Teachers are pure: no I/O, no threads, no clocks. Everything random comes from g
 by the teacher's seed and a counter, so replaying the same results and sample counts rebuilds the
 same teacher exactly. Expensive model fits are split out as ``FitJob`` objects so a service can
 run them off its request path and ``install`` the result later.
+
+Rebuilding a teacher from its history: create it with the same kind, space, seed and params, then
+for each stored result in order call ``skip(n)`` with the number of tasks handed out before it,
+followed by ``observe(result)``; finish with ``skip`` for the tasks handed out since the last
+result. The next ``sample`` then returns what the live teacher would have returned, except that a
+live service may have sampled a few tasks before a due fit was installed, where the replay
+installs it at once.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -41,37 +49,82 @@ class FitJob:
 
 
 class Teacher(ABC):
-    """Hands out tasks in a task space and learns from episode results."""
+    """Hands out tasks in a task space and learns from episode results.
+
+    Subclasses implement ``_draw`` (tasks for a run of sample indices), ``_learn`` (one validated
+    result) and ``_describe`` (their part of ``state``); this class keeps the counters and checks
+    the input, so every kind counts and rejects bad input the same way.
+    """
 
     kind: str
+    params: Any
+    """The kind's parameters: a frozen dataclass of JSON-ready values."""
 
     def __init__(self, space: TaskSpace, seed: int) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         self.space = space
-        self.seed = int(seed)
+        self.seed = seed
         self.tasks_sampled = 0
         self.results_seen = 0
 
-    @abstractmethod
     def sample(self, count: int) -> list[Task]:
-        """Draw ``count`` tasks, each inside the space's bounds."""
+        """Draw ``count`` tasks, each inside the space's bounds.
 
-    @abstractmethod
+        Task ``i`` (counting every task this teacher ever handed out) depends only on the seed,
+        ``i`` and the model installed at the time, never on how the draws were batched."""
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            raise ValueError(f"count must be a non-negative integer, got {count!r}")
+        tasks = self._draw(self.tasks_sampled, count)
+        self.tasks_sampled += count
+        return tasks
+
+    def skip(self, count: int) -> None:
+        """Move past ``count`` tasks handed out before a restart, so the next ``sample`` continues
+        where the live teacher stopped. The tasks are redrawn and dropped rather than just counted,
+        so per-task bookkeeping (such as ALP-GMM's origin tallies) matches the live run."""
+        self.sample(count)
+
     def update(self, result: EpisodeResult) -> FitJob | None:
-        """Record one result; return a fit job when a refit falls due, else ``None``."""
+        """Record one result; return a fit job when a refit falls due, else ``None``.
+
+        Raises ``ValueError`` when the result's task is not a valid task of this space."""
+        task = self.space.validate(result.task)
+        self.results_seen += 1
+        return self._learn(dataclasses.replace(result, task=task))
 
     def install(self, fitted: Any) -> None:
         """Adopt the output of a ``FitJob.run()``. Teachers without models have no jobs."""
         raise RuntimeError(f"{self.kind} teacher has no model to install")
-
-    @abstractmethod
-    def state(self) -> dict[str, Any]:
-        """JSON-ready description of the teacher for the dashboard."""
 
     def observe(self, result: EpisodeResult) -> None:
         """Record a result and run any fit it triggers right here (for tests and replays)."""
         job = self.update(result)
         if job is not None:
             self.install(job.run())
+
+    def state(self) -> dict[str, Any]:
+        """JSON-ready description of the teacher for the dashboard."""
+        return {
+            "kind": self.kind,
+            "seed": self.seed,
+            "params": dataclasses.asdict(self.params),
+            "tasks_sampled": self.tasks_sampled,
+            "results_seen": self.results_seen,
+            **self._describe(),
+        }
+
+    @abstractmethod
+    def _draw(self, first_index: int, count: int) -> list[Task]:
+        """Tasks number ``first_index`` to ``first_index + count - 1``."""
+
+    @abstractmethod
+    def _learn(self, result: EpisodeResult) -> FitJob | None:
+        """Learn from a result whose task has been validated."""
+
+    @abstractmethod
+    def _describe(self) -> dict[str, Any]:
+        """The kind's own JSON-ready state entries."""
 
 
 TeacherFactory = Callable[[TaskSpace, int, Mapping[str, Any]], Teacher]

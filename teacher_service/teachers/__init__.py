@@ -1,0 +1,32 @@
+"""Pure curriculum teachers: no HTTP, no files, no Ray.
+
+``make_teacher(kind, space, seed, params)`` builds one; every kind samples tasks inside the space,
+learns from ``EpisodeResult``s and describes itself as JSON-ready data (see ``base.Teacher``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+from common.task_space import TaskSpace
+from teacher_service.teachers.alp_gmm import AlpGmmTeacher
+from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher, TeacherFactory
+from teacher_service.teachers.manual import ManualTeacher
+from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
+
+TEACHER_KINDS: Mapping[str, TeacherFactory] = MappingProxyType(
+    {teacher.kind: teacher for teacher in (AlpGmmTeacher, ManualTeacher, RandomTeacher, FixedTeacher)}
+)
+
+
+def make_teacher(kind: str, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> Teacher:
+    """Build a teacher, or raise ``ValueError`` naming the unknown kind or the bad parameter."""
+    factory = TEACHER_KINDS.get(kind)
+    if factory is None:
+        raise ValueError(f"unknown teacher kind {kind!r}; expected one of {sorted(TEACHER_KINDS)}")
+    return factory(space, seed, {} if params is None else params)
+
+
+__all__ = ["TEACHER_KINDS", "EpisodeResult", "FitJob", "Teacher", "make_teacher"]

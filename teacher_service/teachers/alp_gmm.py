@@ -1,0 +1,297 @@
+"""ALP-GMM (Portelas et al. 2019): sample tasks where the student's absolute learning progress is high.
+
+For each result, ALP is the absolute reward difference to the nearest earlier task. Every
+``fit_rate`` results, Gaussian mixtures with k = min..max components are fitted to the last
+``fit_rate`` points of (task, ALP) and the one with the lowest AIC is kept. A task then comes from
+a component picked in proportion to its mean ALP, or, with probability ``random_task_ratio``,
+uniformly from the box; before the first fit every task is uniform (the bootstrap).
+
+Two changes from the reference code, each switchable: tasks are rescaled to [0, 1] per dimension
+before the nearest-neighbour search and the fit (in raw units a parameter spanning 0.04 next to
+one spanning 0.89 barely counts), and rewards can be mapped onto [0, 1] from a known range.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections import Counter, deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.special import ndtri
+from sklearn.mixture import GaussianMixture
+
+from common.task_space import Task, TaskSpace
+from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
+from teacher_service.teachers.params import as_bool, as_float, as_int, as_range, parse_params, store
+
+MIN_HISTORY_FOR_ALP = 6
+"""ALP is 0 until this many earlier tasks exist, as in the reference code."""
+
+RECENT_ORIGINS = 1000
+"""How many recent tasks' origins (GMM or uniform) the state reports."""
+
+
+@dataclass(frozen=True)
+class AlpGmmParams:
+    fit_rate: int = 250
+    """Results between two mixture fits; the first ``fit_rate`` tasks are uniform (bootstrap)."""
+    random_task_ratio: float = 0.2
+    """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
+    min_components: int = 2
+    """Fewest Gaussians tried per fit."""
+    max_components: int = 10
+    """Most Gaussians tried per fit; the candidate with the lowest AIC wins."""
+    nb_em_init: int = 1
+    """EM restarts per candidate mixture."""
+    buffer_size: int = 500
+    """Newest tasks scanned directly before joining the k-d tree that answers nearest-neighbour
+    queries; affects speed only."""
+    rescale_tasks: bool = True
+    """Measure distances and fit mixtures on tasks rescaled to [0, 1] per dimension."""
+    reward_range: list[float] | None = None
+    """[low, high] mapped onto [0, 1] (clipped) before ALP is computed; null keeps raw rewards.
+    ALP values in the state are in these normalised units when set."""
+
+    def __post_init__(self) -> None:
+        store(
+            self,
+            fit_rate=as_int("fit_rate", self.fit_rate, minimum=2),
+            random_task_ratio=as_float("random_task_ratio", self.random_task_ratio, 0.0, 1.0),
+            min_components=as_int("min_components", self.min_components, minimum=1),
+            max_components=as_int("max_components", self.max_components, minimum=1),
+            nb_em_init=as_int("nb_em_init", self.nb_em_init, minimum=1),
+            buffer_size=as_int("buffer_size", self.buffer_size, minimum=1),
+            rescale_tasks=as_bool("rescale_tasks", self.rescale_tasks),
+            reward_range=as_range("reward_range", self.reward_range),
+        )
+        if self.min_components > self.max_components:
+            raise ValueError(
+                f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
+            )
+        if self.max_components > self.fit_rate:
+            raise ValueError(
+                f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
+                "each fit sees fit_rate points"
+            )
+
+
+@dataclass(frozen=True)
+class MixtureFit:
+    """The output of one fit job: the chosen mixture over (task features, ALP)."""
+
+    index: int
+    weights: np.ndarray
+    means: np.ndarray
+    covariances: np.ndarray
+    aic_by_components: dict[int, float] = field(default_factory=dict)
+
+
+def fit_mixture(
+    index: int, points: np.ndarray, components: range, nb_em_init: int, random_state: int
+) -> MixtureFit:
+    """Fit one mixture per candidate size and keep the lowest AIC (ties go to fewer components)."""
+    with np.errstate(under="ignore"):
+        mixtures = {
+            k: GaussianMixture(
+                n_components=k, covariance_type="full", n_init=nb_em_init, random_state=random_state
+            ).fit(points)
+            for k in components
+        }
+        aics = {k: float(mixture.aic(points)) for k, mixture in mixtures.items()}
+    best = mixtures[min(aics, key=aics.__getitem__)]
+    return MixtureFit(index, best.weights_, best.means_, best.covariances_, aics)
+
+
+class _NearestReward:
+    """Exact nearest earlier task and its reward. Older tasks sit in a k-d tree that is rebuilt
+    only every ``buffer_size`` additions; the newest are scanned directly."""
+
+    def __init__(self, dims: int, buffer_size: int) -> None:
+        self._tree: cKDTree | None = None
+        self._tree_points = np.empty((0, dims))
+        self._tree_rewards = np.empty(0)
+        self._recent_points = np.empty((buffer_size, dims))
+        self._recent_rewards = np.empty(buffer_size)
+        self._recent = 0
+
+    def __len__(self) -> int:
+        return len(self._tree_rewards) + self._recent
+
+    def reward_near(self, point: np.ndarray) -> float:
+        distance, reward = np.inf, np.nan
+        if self._tree is not None:
+            distance, index = self._tree.query(point)
+            reward = self._tree_rewards[index]
+        if self._recent:
+            distances = np.linalg.norm(self._recent_points[: self._recent] - point, axis=1)
+            nearest = int(np.argmin(distances))
+            if distances[nearest] < distance:
+                reward = self._recent_rewards[nearest]
+        return float(reward)
+
+    def add(self, point: np.ndarray, reward: float) -> None:
+        self._recent_points[self._recent] = point
+        self._recent_rewards[self._recent] = reward
+        self._recent += 1
+        if self._recent == len(self._recent_rewards):
+            self._tree_points = np.vstack([self._tree_points, self._recent_points])
+            self._tree_rewards = np.concatenate([self._tree_rewards, self._recent_rewards])
+            self._tree = cKDTree(self._tree_points)
+            self._recent = 0
+
+
+@dataclass(frozen=True)
+class _Sampler:
+    """An installed mixture, prepared for sampling task features (the ALP coordinate dropped)."""
+
+    fit: MixtureFit
+    choice_cdf: np.ndarray
+    task_means: np.ndarray
+    task_cholesky: np.ndarray
+
+    @classmethod
+    def prepare(cls, fit: MixtureFit) -> _Sampler:
+        alp = np.clip(fit.means[:, -1], 0.0, None)
+        # The reference code picks a component uniformly when no component shows progress.
+        probabilities = alp / alp.sum() if alp.sum() > 0 else np.full(len(alp), 1.0 / len(alp))
+        return cls(
+            fit=fit,
+            choice_cdf=np.cumsum(probabilities),
+            task_means=fit.means[:, :-1],
+            task_cholesky=np.linalg.cholesky(fit.covariances[:, :-1, :-1]),
+        )
+
+    @property
+    def probabilities(self) -> np.ndarray:
+        return np.diff(self.choice_cdf, prepend=0.0)
+
+    def draw(self, choice: np.ndarray, normal_quantiles: np.ndarray) -> np.ndarray:
+        """Task features from uniforms: ``choice`` (n,) picks components, ``normal_quantiles``
+        (n, d) become standard normals by the inverse CDF, so each draw uses a fixed count."""
+        component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
+        # Shift off 0 so the inverse normal CDF stays finite; a 2**-54 bias is immaterial.
+        normals = ndtri(normal_quantiles + 2.0**-54)
+        offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], normals)
+        return self.task_means[component] + offsets
+
+
+class AlpGmmTeacher(Teacher):
+    """Absolute-learning-progress teacher over a Gaussian mixture (see the module docstring)."""
+
+    kind = "alp-gmm"
+
+    def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed)
+        self.params = parse_params(self.kind, AlpGmmParams, params)
+        self._nearest = _NearestReward(len(space), self.params.buffer_size)
+        self._fit_points: deque[np.ndarray] = deque(maxlen=self.params.fit_rate)
+        self._sampler: _Sampler | None = None
+        self.fits_requested = 0
+        self.fits_installed = 0
+        self.origins: Counter[str] = Counter(gmm=0, uniform=0)
+        self._recent_origins: deque[str] = deque(maxlen=RECENT_ORIGINS)
+
+    def _draw(self, first_index: int, count: int) -> list[Task]:
+        dims = len(self.space)
+        # Per task: origin coin, component choice, d normal quantiles, d uniform coordinates.
+        uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + 2 * dims)
+        tasks = self.space.from_unit(uniforms[:, 2 + dims :])
+        from_gmm = np.zeros(count, dtype=bool)
+        if self._sampler is not None:
+            from_gmm = uniforms[:, 0] >= self.params.random_task_ratio
+            features = self._sampler.draw(uniforms[:, 1], uniforms[:, 2 : 2 + dims])
+            tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
+        origins = ["gmm" if gmm else "uniform" for gmm in from_gmm]
+        self.origins.update(origins)
+        self._recent_origins.extend(origins)
+        return [self.space.from_array(row) for row in tasks]
+
+    def _learn(self, result: EpisodeResult) -> FitJob | None:
+        features = self._to_features(self.space.to_array(result.task))
+        reward = self._scaled(result.reward)
+        alp = 0.0
+        if len(self._nearest) >= MIN_HISTORY_FOR_ALP:
+            alp = abs(reward - self._nearest.reward_near(features))
+        self._nearest.add(features, reward)
+        self._fit_points.append(np.append(features, alp))
+        if self.results_seen % self.params.fit_rate:
+            return None
+        index = self.fits_requested
+        self.fits_requested += 1
+        run = functools.partial(
+            fit_mixture,
+            index,
+            np.array(self._fit_points),
+            range(self.params.min_components, self.params.max_components + 1),
+            self.params.nb_em_init,
+            indexed_seed(self.seed, FIT_STREAM, index),
+        )
+        return FitJob(index=index, run=run)
+
+    def install(self, fitted: MixtureFit) -> None:
+        if not isinstance(fitted, MixtureFit):
+            raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
+        if fitted.index != self.fits_installed:
+            raise ValueError(f"fit {fitted.index} arrived out of order: fit {self.fits_installed} is next")
+        self._sampler = _Sampler.prepare(fitted)
+        self.fits_installed += 1
+
+    @property
+    def recent_alps(self) -> np.ndarray:
+        """ALP of the last ``fit_rate`` results: the data the next fit will see."""
+        return np.array([point[-1] for point in self._fit_points])
+
+    def _to_features(self, tasks: np.ndarray) -> np.ndarray:
+        return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)
+
+    def _to_task_units(self, features: np.ndarray) -> np.ndarray:
+        return self.space.from_unit(features) if self.params.rescale_tasks else features
+
+    def _scaled(self, reward: float) -> float:
+        if self.params.reward_range is None:
+            return reward
+        low, high = self.params.reward_range
+        return min(max((reward - low) / (high - low), 0.0), 1.0)
+
+    def _describe(self) -> dict[str, Any]:
+        alps = self.recent_alps
+        return {
+            "bootstrapping": self._sampler is None,
+            "fits": self.fits_installed,
+            "fits_requested": self.fits_requested,
+            "last_fit_index": self.fits_installed - 1 if self.fits_installed else None,
+            "next_fit_at_results": (self.results_seen // self.params.fit_rate + 1) * self.params.fit_rate,
+            "recent_mean_alp": float(alps.mean()) if len(alps) else None,
+            "components": self._components(),
+            "aic_by_components": (
+                {str(k): aic for k, aic in self._sampler.fit.aic_by_components.items()} if self._sampler else {}
+            ),
+            "task_origins": dict(self.origins),
+            "recent_task_origins": list(self._recent_origins),
+        }
+
+    def _components(self) -> list[dict[str, Any]]:
+        if self._sampler is None:
+            return []
+        fit = self._sampler.fit
+        scale = (self.space.high - self.space.low) if self.params.rescale_tasks else np.ones(len(self.space))
+        components = []
+        for weight, mean, covariance, probability in zip(
+            fit.weights, fit.means, fit.covariances, self._sampler.probabilities, strict=True
+        ):
+            task_mean = self._to_task_units(mean[:-1])
+            components.append(
+                {
+                    "weight": float(weight),
+                    "mean": {name: float(v) for name, v in zip(self.space.names, task_mean, strict=True)},
+                    "covariance": (covariance[:-1, :-1] * np.outer(scale, scale)).tolist(),
+                    "mean_alp": float(mean[-1]),
+                    "sampling_probability": float(probability),
+                }
+            )
+        return components

@@ -1,0 +1,194 @@
+"""ALP-GMM: bootstrap, refit cadence, model choice by AIC, ALP values and where tasks come from."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from teacher_service.teachers import EpisodeResult, make_teacher
+from teacher_service.teachers.alp_gmm import AlpGmmTeacher, MixtureFit, fit_mixture
+
+SKEWED = TaskSpace(
+    [
+        Parameter("wide", 0.0, 100.0, hardest=100.0, easiest=0.0),
+        Parameter("narrow", -1.0, 0.0, hardest=-1.0, easiest=0.0),
+    ]
+)
+"""Two parameters whose ranges differ 100-fold, like jp2 next to bias_obj_y."""
+
+
+def alp_gmm(space: TaskSpace = SKEWED, seed: int = 0, **params: Any) -> AlpGmmTeacher:
+    teacher = make_teacher("alp-gmm", space, seed, params)
+    assert isinstance(teacher, AlpGmmTeacher)
+    return teacher
+
+
+def feed(teacher: AlpGmmTeacher, history: list[tuple[dict[str, float], float]]) -> None:
+    for task, reward in history:
+        teacher.observe(EpisodeResult(task, reward))
+
+
+def two_component_fit(alps: tuple[float, float], means: list[list[float]], variance: float) -> MixtureFit:
+    """A hand-made mixture over (wide, narrow, ALP) in unit task coordinates."""
+    return MixtureFit(
+        index=0,
+        weights=np.array([0.5, 0.5]),
+        means=np.array([[*means[0], alps[0]], [*means[1], alps[1]]]),
+        covariances=np.array([np.eye(3) * variance] * 2),
+    )
+
+
+def test_first_fit_rate_tasks_are_uniform_and_the_first_fit_comes_due_after_them() -> None:
+    teacher = alp_gmm(KUKA_TASK_SPACE, fit_rate=30, max_components=3)
+    jobs = []
+    for _ in range(30):
+        jobs.append(teacher.update(EpisodeResult(teacher.sample(1)[0], 0.0)))
+    assert jobs[:-1] == [None] * 29 and jobs[-1] is not None
+    assert teacher.state()["task_origins"] == {"gmm": 0, "uniform": 30}
+
+    teacher.sample(50)
+    assert teacher.state()["task_origins"]["gmm"] == 0, "a due fit changes nothing until it is installed"
+    assert teacher.state()["bootstrapping"]
+
+    teacher.install(jobs[-1].run())
+    teacher.sample(1000)
+    origins = teacher.state()["task_origins"]
+    assert not teacher.state()["bootstrapping"]
+    assert origins["uniform"] - 80 == pytest.approx(0.2 * 1000, abs=40)
+    assert teacher.state()["recent_task_origins"].count("gmm") == origins["gmm"]
+
+
+def test_refits_fall_due_every_fit_rate_results_and_install_in_order() -> None:
+    teacher = alp_gmm(fit_rate=20, max_components=3)
+    due_at, jobs = [], []
+    rng = np.random.default_rng(0)
+    for result in range(1, 71):
+        job = teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random())))
+        if job is not None:
+            due_at.append(result)
+            jobs.append(job)
+    assert due_at == [20, 40, 60]
+    assert [job.index for job in jobs] == [0, 1, 2]
+    assert teacher.state()["next_fit_at_results"] == 80
+
+    fits = [job.run() for job in jobs]
+    with pytest.raises(ValueError, match="fit 1 arrived out of order: fit 0 is next"):
+        teacher.install(fits[1])
+    for fit in fits:
+        teacher.install(fit)
+    assert teacher.state()["fits"] == 3 and teacher.state()["last_fit_index"] == 2
+
+
+def test_each_fit_sees_the_last_fit_rate_points() -> None:
+    teacher = alp_gmm(fit_rate=20, max_components=2)
+    tasks = [{"wide": float(i), "narrow": -0.5} for i in range(40)]
+    jobs = [teacher.update(EpisodeResult(task, 0.0)) for task in tasks]
+    points = jobs[-1].run.args[1]
+    assert points.shape == (20, 3)
+    assert points[:, 0] == pytest.approx(np.arange(20, 40) / 100)
+
+
+def test_aic_picks_three_components_for_data_from_three_gaussians() -> None:
+    rng = np.random.default_rng(7)
+    centres = np.array([[0.15, 0.2, 0.05], [0.5, 0.8, 0.6], [0.85, 0.3, 0.3]])
+    points = np.vstack([rng.normal(centre, 0.04, size=(100, 3)) for centre in centres])
+    fit = fit_mixture(0, points, range(2, 11), nb_em_init=1, random_state=0)
+    assert set(fit.aic_by_components) == set(range(2, 11))
+    assert len(fit.weights) == 3 == min(fit.aic_by_components, key=fit.aic_by_components.__getitem__)
+    found = fit.means[np.argsort(fit.means[:, 0])]
+    assert found == pytest.approx(centres, abs=0.02)
+
+
+def test_the_same_seed_and_history_give_the_same_fits() -> None:
+    def fits(seed: int) -> list[MixtureFit]:
+        teacher = alp_gmm(seed=seed, fit_rate=40, max_components=4)
+        rng = np.random.default_rng(1)
+        jobs = [teacher.update(EpisodeResult(task, float(rng.random()))) for task in teacher.sample(80)]
+        return [job.run() for job in jobs if job is not None]
+
+    for fit, again in zip(fits(3), fits(3), strict=True):
+        assert fit.index == again.index
+        assert np.array_equal(fit.means, again.means) and np.array_equal(fit.covariances, again.covariances)
+
+
+def test_alp_is_the_reward_change_from_the_nearest_earlier_task() -> None:
+    teacher = alp_gmm(rescale_tasks=False)
+    corners = [{"wide": w, "narrow": n} for w in (0.0, 100.0) for n in (-1.0, 0.0)]
+    middle = [{"wide": 50.0, "narrow": -0.5}, {"wide": 50.0, "narrow": 0.0}]
+    history = [(task, float(i)) for i, task in enumerate(corners + middle)]
+    history += [({"wide": 99.0, "narrow": -0.9}, 10.0), ({"wide": 1.0, "narrow": 0.0}, 0.5)]
+    feed(teacher, history)
+    # Six earlier tasks are needed before ALP is measured; then the nearest corners had 2 and 1.
+    assert teacher.recent_alps.tolist() == [0, 0, 0, 0, 0, 0, 8.0, 0.5]
+
+
+def test_rescaling_makes_a_narrow_parameter_count() -> None:
+    history = [({"wide": 0.0, "narrow": -0.5}, 1.0), ({"wide": 30.0, "narrow": 0.0}, 5.0)] * 3
+    probe = ({"wide": 10.0, "narrow": 0.0}, 4.0)
+    raw, rescaled = alp_gmm(rescale_tasks=False), alp_gmm(rescale_tasks=True)
+    feed(raw, [*history, probe])
+    feed(rescaled, [*history, probe])
+    # Raw units: 10 away from the first task, 20 from the second. Unit box: 0.51 versus 0.2.
+    assert raw.recent_alps[-1] == 3.0
+    assert rescaled.recent_alps[-1] == 1.0
+
+
+def test_rewards_are_normalised_by_the_configured_range() -> None:
+    history = [({"wide": 0.0, "narrow": -0.5}, 0.0)] * 6
+    history += [({"wide": 50.0, "narrow": -0.5}, 2.0), ({"wide": 51.0, "narrow": -0.5}, 40.0)]
+    raw, normalised = alp_gmm(), alp_gmm(reward_range=[-10.0, 10.0])
+    feed(raw, history)
+    feed(normalised, history)
+    assert raw.recent_alps[-2:].tolist() == [2.0, 38.0]
+    # 0 -> 0.5 and 2 -> 0.6; 40 is clipped to the top of the range, 1.0.
+    assert normalised.recent_alps[-2:] == pytest.approx([0.1, 0.4])
+
+
+def test_the_nearest_neighbour_buffer_changes_speed_not_answers() -> None:
+    rng = np.random.default_rng(5)
+    history = [({"wide": 100 * a, "narrow": -b}, float(r)) for a, b, r in rng.random((300, 3))]
+    small_buffer, large_buffer = alp_gmm(buffer_size=7, fit_rate=1000), alp_gmm(fit_rate=1000)
+    feed(small_buffer, history)
+    feed(large_buffer, history)
+    assert np.array_equal(small_buffer.recent_alps, large_buffer.recent_alps)
+    assert small_buffer.recent_alps.max() > 0
+
+
+def test_tasks_come_from_components_in_proportion_to_their_alp() -> None:
+    teacher = alp_gmm(random_task_ratio=0.0)
+    teacher.install(two_component_fit(alps=(0.3, 0.1), means=[[0.2, 0.8], [0.7, 0.3]], variance=1e-4))
+    tasks = np.array([[t["wide"], t["narrow"]] for t in teacher.sample(4000)])
+    near_first = np.linalg.norm(tasks - [20.0, -0.2], axis=1) < 5
+    near_second = np.linalg.norm(tasks - [70.0, -0.7], axis=1) < 5
+    assert near_first.mean() == pytest.approx(0.75, abs=0.03)
+    assert near_second.mean() == pytest.approx(0.25, abs=0.03)
+    assert teacher.state()["task_origins"] == {"gmm": 4000, "uniform": 0}
+
+
+def test_state_reports_components_in_task_units() -> None:
+    teacher = alp_gmm()
+    teacher.install(two_component_fit(alps=(0.0, 0.0), means=[[0.2, 0.8], [0.7, 0.3]], variance=0.01))
+    first, second = teacher.state()["components"]
+    assert first["mean"] == pytest.approx({"wide": 20.0, "narrow": -0.2})
+    assert np.array(first["covariance"]) == pytest.approx(np.diag([100.0, 0.01]))
+    assert first["weight"] == 0.5 and first["mean_alp"] == 0.0
+    assert first["sampling_probability"] == second["sampling_probability"] == 0.5, "no progress: pick evenly"
+
+
+def test_gmm_tasks_go_where_reward_changes() -> None:
+    """Reward rises over time only in one corner; after a few fits most GMM tasks go there."""
+    teacher = alp_gmm(KUKA_TASK_SPACE, seed=2, fit_rate=100, reward_range=[0.0, 1.0])
+    practice = 0
+    for _ in range(600):
+        task = teacher.sample(1)[0]
+        in_corner = task["rnd_obj_x"] < 0.3 and task["jp2"] > 1.0
+        practice += in_corner
+        teacher.observe(EpisodeResult(task, min(practice / 100, 1.0) if in_corner else 0.0))
+    teacher.sample(1000)
+    components = teacher.state()["components"]
+    best = max(components, key=lambda component: component["mean_alp"])
+    assert best["mean"]["rnd_obj_x"] < 0.3 and best["mean"]["jp2"] > 1.0
+    assert best["sampling_probability"] > 0.5

@@ -1,0 +1,178 @@
+"""Behaviour every teacher kind shares: the factory, bounds, determinism, replay and JSON state."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+from scripted_student import run_student
+
+from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from teacher_service.teachers import TEACHER_KINDS, EpisodeResult, Teacher, make_teacher
+
+# Small fits keep the suite fast; the defaults are exercised in test_alp_gmm_teacher.py.
+KIND_PARAMS: dict[str, dict[str, Any]] = {
+    "alp-gmm": {"fit_rate": 40, "max_components": 4, "reward_range": [-2.0, 2.0]},
+    "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
+    "random": {},
+    "fixed": {},
+}
+
+
+def build(kind: str, seed: int = 3) -> Teacher:
+    return make_teacher(kind, KUKA_TASK_SPACE, seed, KIND_PARAMS[kind])
+
+
+def assert_in_bounds(space: TaskSpace, tasks: list[dict[str, float]]) -> None:
+    for task in tasks:
+        assert space.validate(task) == task
+
+
+def assert_plain_json(value: Any) -> None:
+    """Only the types ``json.loads`` produces, so the state survives any encoder unchanged."""
+    if isinstance(value, dict):
+        assert all(type(key) is str for key in value)
+        for item in value.values():
+            assert_plain_json(item)
+    elif isinstance(value, list):
+        for item in value:
+            assert_plain_json(item)
+    else:
+        assert type(value) in (str, int, float, bool, type(None)), f"{value!r} is a {type(value).__name__}"
+
+
+def test_every_kind_is_registered() -> None:
+    assert set(TEACHER_KINDS) == set(KIND_PARAMS)
+    for kind in KIND_PARAMS:
+        assert build(kind).kind == kind
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_tasks_stay_inside_the_box(kind: str) -> None:
+    teacher = build(kind)
+    handed_out = run_student(teacher, 200, batch=7)
+    assert_in_bounds(KUKA_TASK_SPACE, handed_out + teacher.sample(2000))
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_same_seed_and_results_give_the_same_tasks(kind: str) -> None:
+    first, second = build(kind), build(kind)
+    assert run_student(first, 120, batch=5) == run_student(second, 120, batch=5)
+    assert first.sample(50) == second.sample(50)
+    assert first.state() == second.state()
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_batching_does_not_change_the_tasks(kind: str) -> None:
+    at_once, in_pieces = build(kind), build(kind)
+    run_student(at_once, 100)
+    run_student(in_pieces, 100)
+    assert at_once.sample(30) == in_pieces.sample(1) + in_pieces.sample(12) + in_pieces.sample(17)
+
+
+@pytest.mark.parametrize("kind", ["alp-gmm", "random"])
+def test_the_seed_matters(kind: str) -> None:
+    assert run_student(build(kind, seed=3), 100) != run_student(build(kind, seed=4), 100)
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_replaying_the_history_rebuilds_the_teacher(kind: str) -> None:
+    live = build(kind)
+    history: list[tuple[int, EpisodeResult]] = []
+    for step in range(90):
+        tasks = live.sample(1 + step % 3)
+        result = EpisodeResult(tasks[0], reward=float(step % 7) / 3 - 1)
+        live.observe(result)
+        history.append((len(tasks), result))
+    live.sample(4)
+
+    rebuilt = build(kind)
+    for handed_out, result in history:
+        rebuilt.skip(handed_out)
+        rebuilt.observe(result)
+    rebuilt.skip(4)
+
+    assert rebuilt.state() == live.state()
+    assert rebuilt.sample(30) == live.sample(30)
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_state_is_plain_json(kind: str) -> None:
+    teacher = build(kind)
+    run_student(teacher, 100)
+    state = teacher.state()
+    assert_plain_json(state)
+    assert json.loads(json.dumps(state)) == state
+    assert state["kind"] == kind
+    assert state["tasks_sampled"] == 100 and state["results_seen"] == 100
+
+
+def test_unknown_kind_is_rejected_by_name() -> None:
+    with pytest.raises(ValueError, match="unknown teacher kind 'alpgmm'"):
+        make_teacher("alpgmm", KUKA_TASK_SPACE, 0)
+
+
+@pytest.mark.parametrize(
+    ("kind", "params", "message"),
+    [
+        ("alp-gmm", {"fitrate": 10}, r"unknown alp-gmm parameter\(s\) \['fitrate'\]"),
+        ("alp-gmm", {"fit_rate": 1}, "fit_rate must be at least 2"),
+        ("alp-gmm", {"fit_rate": 20.5}, "fit_rate must be an integer"),
+        ("alp-gmm", {"random_task_ratio": 1.5}, "random_task_ratio must lie in"),
+        ("alp-gmm", {"max_components": 300}, r"max_components \(300\) cannot exceed fit_rate"),
+        ("alp-gmm", {"min_components": 5, "max_components": 4}, "min_components"),
+        ("alp-gmm", {"rescale_tasks": "yes"}, "rescale_tasks must be true or false"),
+        ("alp-gmm", {"reward_range": [1.0, 1.0]}, "reward_range must have low < high"),
+        ("alp-gmm", {"reward_range": [0.0, "ten"]}, r"reward_range\[1\] must be a finite number"),
+        ("alp-gmm", {"nb_em_init": True}, "nb_em_init must be an integer"),
+        ("manual", {"threshold": float("nan")}, "threshold must be a finite number"),
+        ("manual", {"window": 10, "min_episodes": 20}, r"min_episodes \(20\) cannot exceed window"),
+        ("manual", {"start": {"jp2": 0.5}}, "start: missing task parameter"),
+        ("manual", {"start": {**KUKA_TASK_SPACE.easiest(), "jp2": 2.0}}, "start: task parameter 'jp2'"),
+        ("random", {"seed": 1}, r"unknown random parameter\(s\) \['seed'\]"),
+        ("fixed", {"point": {**KUKA_TASK_SPACE.hardest(), "bias_obj_y": 0.5}}, "point: task parameter 'bias_obj_y'"),
+        ("fixed", {"point": "hardest"}, "point must be null or a task"),
+    ],
+)
+def test_bad_parameters_are_rejected_by_name(kind: str, params: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        make_teacher(kind, KUKA_TASK_SPACE, 0, params)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True, "7"])
+def test_bad_seeds_are_rejected(seed: Any) -> None:
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        make_teacher("random", KUKA_TASK_SPACE, seed)
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_bad_input_is_rejected_without_changing_the_teacher(kind: str) -> None:
+    teacher = build(kind)
+    outside = {**KUKA_TASK_SPACE.hardest(), "rnd_obj_x": 1.5}
+    with pytest.raises(ValueError, match="rnd_obj_x"):
+        teacher.update(EpisodeResult(outside, 1.0))
+    with pytest.raises(ValueError, match="count must be a non-negative integer"):
+        teacher.sample(-1)
+    with pytest.raises(ValueError, match="reward must be finite"):
+        EpisodeResult(KUKA_TASK_SPACE.hardest(), float("inf"))
+    assert teacher.results_seen == 0 and teacher.tasks_sampled == 0
+
+
+def test_fixed_teacher_defaults_to_the_hardest_point_and_needs_one() -> None:
+    assert build("fixed").sample(3) == [KUKA_TASK_SPACE.hardest()] * 3
+    point = {**KUKA_TASK_SPACE.easiest(), "rnd_obj_x": 0.5}
+    assert make_teacher("fixed", KUKA_TASK_SPACE, 0, {"point": point}).sample(1) == [point]
+    unanchored = TaskSpace([Parameter("x", 0.0, 1.0)])
+    with pytest.raises(ValueError, match="point: none given"):
+        make_teacher("fixed", unanchored, 0)
+
+
+def test_random_teacher_covers_the_box_evenly() -> None:
+    tasks = make_teacher("random", KUKA_TASK_SPACE, 0).sample(4000)
+    for parameter in KUKA_TASK_SPACE.parameters:
+        values = sorted(task[parameter.name] for task in tasks)
+        width = parameter.high - parameter.low
+        quartiles = [values[len(values) * q // 4] for q in (1, 2, 3)]
+        expected = [parameter.low + width * q / 4 for q in (1, 2, 3)]
+        assert quartiles == pytest.approx(expected, abs=0.05 * width)
