@@ -11,7 +11,9 @@ import argparse
 import importlib
 import sys
 
-COMMANDS: dict[str, tuple[str, str]] = {}
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("common.demo", "Write a short GIF of the KUKA grasp environment under random actions."),
+}
 
 
 def _build_parser(chosen: str | None) -> argparse.ArgumentParser:

@@ -1,0 +1,272 @@
+"""``KukaGrasp-v0``: the KUKA arm descends over a tray and must be above a block when it lands.
+
+The rules are those of pybullet's ``kukaGymEnv`` as used in the book (chapter 14): the agent moves
+the gripper in x/y and turns the wrist, the environment lowers it by a fixed amount every step,
+and the first touch of the tray triggers a scripted grasp that ends the episode. The curriculum
+task (``common.task_space.KUKA_TASK_SPACE``) sets how random the block's placement is and how low
+the arm starts.
+
+Each environment owns a DIRECT-mode physics client, so any number can live in one process. The
+scene is loaded once and snapshotted; a reset restores the snapshot in under a millisecond instead
+of reloading every model (tens of milliseconds), with the same trajectories.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium
+import numpy as np
+import pybullet
+import pybullet_data
+from gymnasium import spaces
+from pybullet_utils.bullet_client import BulletClient
+
+from common.kuka_arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
+from common.task_space import KUKA_TASK_SPACE, Task
+
+TIME_STEP = 1.0 / 240.0
+SOLVER_ITERATIONS = 150
+GRAVITY = -10.0
+
+PLANE_POSITION = (0.0, 0.0, -1.0)
+TABLE_POSITION = (0.5, 0.0, -0.82)
+TRAY_POSITION = (0.64, 0.075, -0.19)
+TRAY_ORIENTATION = (0.0, 0.0, 1.0, 0.0)
+BLOCK_Z = -0.15
+JP2_JOINT, JP4_JOINT = 1, 3  # the start joints that the task's jp2 and jp4 set
+
+MOVE_PER_ACTION = 0.005
+YAW_PER_ACTION = 0.05
+DESCENT_PER_STEP = 0.0005
+FINGER_OPENING = 0.3
+
+TRAY_CONTACT_DISTANCE = 0.005
+GRASP_CLOSE_STEPS = 100
+GRASP_CLOSE_RISE = 0.0001
+GRASP_LIFT_STEPS = 1000
+GRASP_LIFT_RISE = 0.001
+LIFT_BLOCK_DONE_Z = 0.23
+LIFT_GRIPPER_DONE_Z = 0.5
+SUCCESS_BLOCK_Z = 0.2
+AABB_SAFETY_MARGIN = 0.05
+WORLD_BOUND = 5.0  # metres; well beyond anything in reach of the arm or the table
+
+DISTANCE_PENALTY = 10.0
+SUCCESS_BONUS = 10000.0
+ROTATION_PENALTY = 10.0
+REWARD_SCALE = 1.0 / 1000.0  # the book's scaling: a success is worth about +10
+
+CAMERA_TARGET = (0.4, 0.0, 0.1)
+CAMERA_DISTANCE = 1.4
+CAMERA_YAW = 55.0
+CAMERA_PITCH = -27.0
+
+
+class KukaGraspEnv(gymnasium.Env):
+    """Grasp a block from a tray with a KUKA iiwa arm, at a difficulty set by a curriculum task.
+
+    Observation (9): the gripper's world position and Euler angles, then the block's x, y and yaw
+    in the gripper's frame. Action (3, in [-1, 1]): gripper x and y moves and wrist yaw change.
+    Pass a task with ``reset(options={"task": {...}})``; it is kept for later resets. Without one
+    the environment uses the hardest task, the book's evaluation setting.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 240}  # one step is 1/240 s of physics
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        max_steps: int = 1000,
+        task: Mapping[str, float] | None = None,
+        render_width: int = 320,
+        render_height: int = 240,
+        reload_on_reset: bool = False,
+    ) -> None:
+        """``reload_on_reset`` rebuilds the scene from the model files at every reset, as the
+        original environment did; it is slower and exists to check the snapshot restore."""
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            modes = self.metadata["render_modes"]
+            raise ValueError(f"render_mode must be one of {modes} or None, got {render_mode!r}")
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+        if render_width < 1 or render_height < 1:
+            raise ValueError(f"render size must be positive, got {render_width}x{render_height}")
+        self.render_mode = render_mode
+        self.max_steps = max_steps
+        self.render_width = render_width
+        self.render_height = render_height
+        self.reload_on_reset = reload_on_reset
+        self._task: Task = KUKA_TASK_SPACE.validate(task) if task is not None else KUKA_TASK_SPACE.hardest()
+
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        bound = np.array([WORLD_BOUND] * 3 + [math.pi] * 3 + [WORLD_BOUND] * 2 + [math.pi], dtype=np.float32)
+        self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
+
+        self._client = client = BulletClient(connection_mode=pybullet.DIRECT)
+        # Bound once: BulletClient builds a new partial on every attribute access.
+        self._step_simulation = client.stepSimulation
+        self._closest_points = client.getClosestPoints
+        self._overlapping_objects = client.getOverlappingObjects
+        self._link_state = client.getLinkState
+        self._base_pose = client.getBasePositionAndOrientation
+        self._invert_transform = client.invertTransform
+        self._multiply_transforms = client.multiplyTransforms
+        self._euler = client.getEulerFromQuaternion
+        self._data_path = pybullet_data.getDataPath()
+        self._load_scene()
+        self._steps = 0
+
+    @property
+    def task(self) -> Task:
+        """The task used by the current episode and, until another is given, by later ones."""
+        return dict(self._task)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        options = dict(options or {})
+        new_task = options.pop("task", None)
+        if options:
+            raise ValueError(f"unknown reset option(s) {sorted(options)}; the only option is 'task'")
+        if new_task is not None:
+            self._task = KUKA_TASK_SPACE.validate(new_task)
+        super().reset(seed=seed)
+
+        if self.reload_on_reset:
+            self._load_scene()
+        else:
+            self._client.restoreState(self._scene_state)
+        self._place_block()
+        start_pose = list(DEFAULT_START_POSE)
+        start_pose[JP2_JOINT] = self._task["jp2"]
+        start_pose[JP4_JOINT] = self._task["jp4"]
+        self._arm.reset(start_pose)
+        self._step_simulation()
+        self._steps = 0
+        return self._observe()[0], {"task": self.task}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        dx, dy, dyaw = np.clip(action, -1.0, 1.0).tolist()
+        dyaw *= YAW_PER_ACTION
+        self._arm.apply(dx * MOVE_PER_ACTION, dy * MOVE_PER_ACTION, -DESCENT_PER_STEP, dyaw, FINGER_OPENING)
+        self._step_simulation()
+        self._steps += 1
+
+        terminated = self._touches_tray()
+        if terminated:
+            self._grasp()
+        observation, block_z = self._observe()
+        success = block_z > SUCCESS_BLOCK_Z
+        reward = (
+            -DISTANCE_PENALTY * self._block_to_end_effector_distance()
+            + SUCCESS_BONUS * success
+            - ROTATION_PENALTY * abs(dyaw)
+        ) * REWARD_SCALE
+        truncated = not terminated and self._steps >= self.max_steps
+        return observation, reward, terminated, truncated, {"is_success": success}
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        client = self._client
+        view = client.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=CAMERA_TARGET, distance=CAMERA_DISTANCE,
+            yaw=CAMERA_YAW, pitch=CAMERA_PITCH, roll=0.0, upAxisIndex=2,
+        )
+        projection = client.computeProjectionMatrixFOV(
+            fov=60.0, aspect=self.render_width / self.render_height, nearVal=0.05, farVal=10.0
+        )
+        _, _, pixels, _, _ = client.getCameraImage(
+            self.render_width, self.render_height, view, projection,
+            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+        )
+        return np.asarray(pixels, dtype=np.uint8).reshape(self.render_height, self.render_width, 4)[:, :, :3]
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._client.disconnect()
+            self._client = None
+
+    def _load_scene(self) -> None:
+        """Build the scene in the original's load order and snapshot it for fast resets."""
+        client = self._client
+        client.resetSimulation()
+        client.setPhysicsEngineParameter(numSolverIterations=SOLVER_ITERATIONS)
+        client.setTimeStep(TIME_STEP)
+        path = self._data_path
+        client.loadURDF(os.path.join(path, "plane.urdf"), PLANE_POSITION)
+        client.loadURDF(os.path.join(path, "table/table.urdf"), TABLE_POSITION)
+        self._block = client.loadURDF(os.path.join(path, "block.urdf"), (0.55, 0.0, BLOCK_Z))
+        client.setGravity(0.0, 0.0, GRAVITY)
+        self._arm = KukaArm(client, path)
+        self._tray = client.loadURDF(os.path.join(path, "tray/tray.urdf"), TRAY_POSITION, TRAY_ORIENTATION)
+        self._scene_state = client.saveState()
+        tray_low, tray_high = client.getAABB(self._tray)
+        reach = TRAY_CONTACT_DISTANCE + AABB_SAFETY_MARGIN
+        self._tray_zone = (tuple(v - reach for v in tray_low), tuple(v + reach for v in tray_high))
+
+    def _place_block(self) -> None:
+        """Book's placement: each ``rnd_*`` scales the share of the random range used."""
+        task = self._task
+        u_x, u_y, u_yaw = self.np_random.random(3)
+        x = 0.55 + 0.12 * u_x * task["rnd_obj_x"]
+        y = task["bias_obj_y"] + 0.2 * u_y * task["rnd_obj_y"]
+        yaw = 0.5 * math.pi + math.pi * u_yaw * task["rnd_obj_ang"]
+        orientation = self._client.getQuaternionFromEuler((0.0, 0.0, yaw))
+        self._client.resetBasePositionAndOrientation(self._block, (x, y, BLOCK_Z), orientation)
+
+    def _grasp(self) -> None:
+        """The original's scripted grasp: close the fingers while creeping up, then lift."""
+        arm, step_simulation = self._arm, self._step_simulation
+        opening = FINGER_OPENING
+        for _ in range(GRASP_CLOSE_STEPS):
+            arm.apply(0.0, 0.0, GRASP_CLOSE_RISE, 0.0, opening)
+            step_simulation()
+            opening = max(opening - FINGER_OPENING / GRASP_CLOSE_STEPS, 0.0)
+        for _ in range(GRASP_LIFT_STEPS):
+            arm.apply(0.0, 0.0, GRASP_LIFT_RISE, 0.0, opening)
+            step_simulation()
+            if self._base_pose(self._block)[0][2] > LIFT_BLOCK_DONE_Z:
+                break
+            if self._link_state(arm.uid, END_EFFECTOR_LINK)[0][2] > LIFT_GRIPPER_DONE_Z:
+                break
+
+    def _touches_tray(self) -> bool:
+        """Exact tray-contact test, skipped while no arm link's bounding box is near the tray.
+
+        The broadphase query costs a fraction of ``getClosestPoints``; its boxes may lag a step
+        behind, which the safety margin covers many times over at the arm's speed limit.
+        """
+        arm_uid = self._arm.uid
+        near = self._overlapping_objects(*self._tray_zone) or ()
+        if not any(uid == arm_uid for uid, _ in near):
+            return False
+        return bool(self._closest_points(self._tray, arm_uid, TRAY_CONTACT_DISTANCE))
+
+    def _block_to_end_effector_distance(self) -> float:
+        points = self._closest_points(self._block, self._arm.uid, 1000.0, -1, END_EFFECTOR_LINK)
+        return min(point[8] for point in points)
+
+    def _observe(self) -> tuple[np.ndarray, float]:
+        """The observation, and the block's height (for the success test, read here to save a call)."""
+        gripper_position, gripper_orientation = self._link_state(self._arm.uid, GRIPPER_LINK)[:2]
+        block_position, block_orientation = self._base_pose(self._block)
+        inverse_position, inverse_orientation = self._invert_transform(gripper_position, gripper_orientation)
+        block_in_gripper, block_orientation_in_gripper = self._multiply_transforms(
+            inverse_position, inverse_orientation, block_position, block_orientation
+        )
+        observation = np.array(
+            [
+                *gripper_position,
+                *self._euler(gripper_orientation),
+                block_in_gripper[0],
+                block_in_gripper[1],
+                self._euler(block_orientation_in_gripper)[2],
+            ],
+            dtype=np.float32,
+        )
+        return observation, block_position[2]
