@@ -13,6 +13,7 @@ import sys
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("common.demo", "Write a short GIF of the KUKA grasp environment under random actions."),
+    "serve": ("teacher_service.cli", "Run the teacher service: curricula over HTTP, persisted in SQLite."),
 }
 
 
@@ -23,7 +24,7 @@ def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module_path, summary) in COMMANDS.items():
-        command_parser = sub.add_parser(name, help=summary, description=summary)
+        command_parser = sub.add_parser(name, help=summary.replace("%", "%%"), description=summary)
         if name == chosen:
             importlib.import_module(module_path).add_arguments(command_parser)
     return parser

@@ -1,0 +1,152 @@
+"""The teacher service's HTTP API as pydantic models, shared by the service and its client.
+
+Request models forbid unknown fields so a misspelt key is a 422, not a silently ignored value.
+Rewards and bounds must be finite: JSON parsers accept ``NaN`` and ``Infinity``, teachers must not.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from common.task_space import Parameter, Task, TaskSpace
+
+API_PREFIX = "/api/v1"
+
+TeacherKind = Literal["alp-gmm", "manual", "random", "fixed"]
+
+CURRICULUM_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+MAX_TASKS_PER_REQUEST = 1024
+MAX_RESULTS_PER_REQUEST = 1024
+MAX_SEED = 2**63 - 1
+"""Seeds and lengths are stored as SQLite integers, which are signed 64-bit."""
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Request(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ParameterSpec(_Request):
+    """One dimension of a task space; ``hardest``/``easiest`` anchor the manual and fixed teachers."""
+
+    name: str = Field(min_length=1, max_length=64)
+    low: FiniteFloat
+    high: FiniteFloat
+    hardest: FiniteFloat | None = None
+    easiest: FiniteFloat | None = None
+
+    def to_parameter(self) -> Parameter:
+        return Parameter(self.name, self.low, self.high, hardest=self.hardest, easiest=self.easiest)
+
+    @classmethod
+    def from_parameter(cls, parameter: Parameter) -> ParameterSpec:
+        return cls(name=parameter.name, low=parameter.low, high=parameter.high,
+                   hardest=parameter.hardest, easiest=parameter.easiest)
+
+
+class CurriculumSpec(_Request):
+    """What defines a curriculum: two specs are the same curriculum exactly when they are equal."""
+
+    teacher: TeacherKind
+    space: list[ParameterSpec] = Field(min_length=1, max_length=64)
+    params: dict[str, Any] = Field(default_factory=dict, description="Teacher hyperparameters; see the teacher kinds.")
+    seed: int = Field(default=0, ge=0, le=MAX_SEED)
+
+    @model_validator(mode="after")
+    def _space_is_valid(self) -> CurriculumSpec:
+        space = self.task_space()
+        for parameter in space.parameters:
+            if not math.isfinite(parameter.high - parameter.low):
+                raise ValueError(f"parameter {parameter.name!r}: the width high - low overflows a float")
+        return self
+
+    def task_space(self) -> TaskSpace:
+        return TaskSpace(p.to_parameter() for p in self.space)
+
+
+class CurriculumCounters(BaseModel):
+    tasks_issued: int
+    results_received: int
+    results_per_second: float = Field(description="Results accepted per second over the recent window.")
+    tasks_outstanding: int = Field(description="Issued tasks with no result yet.")
+    fits_completed: int
+    fits_pending: int
+    last_fit_at: float | None = Field(description="Unix time the last fit was installed.")
+
+
+class CurriculumInfo(BaseModel):
+    name: str
+    config: CurriculumSpec
+    created_at: float
+    counters: CurriculumCounters
+
+
+class CurriculumList(BaseModel):
+    curricula: list[CurriculumInfo]
+
+
+class TaskRequest(_Request):
+    count: int = Field(default=1, ge=1, le=MAX_TASKS_PER_REQUEST)
+
+
+class IssuedTask(BaseModel):
+    task_id: str
+    params: Task
+
+
+class TaskBatch(BaseModel):
+    tasks: list[IssuedTask]
+
+
+class ResultItem(_Request):
+    task_id: str = Field(min_length=1, max_length=200)
+    reward: FiniteFloat
+    success: bool | None = None
+    length: int | None = Field(default=None, ge=0, le=MAX_SEED)
+
+
+class ResultBatch(_Request):
+    results: list[ResultItem] = Field(max_length=MAX_RESULTS_PER_REQUEST)
+
+
+class ResultAck(BaseModel):
+    accepted: int = Field(description="Results applied by this request.")
+    duplicates: int = Field(description="Results for tasks that already had one; ignored.")
+
+
+class FitEvent(BaseModel):
+    index: int
+    started_at: float
+    finished_at: float
+    duration_s: float
+    replayed: bool = Field(description="Ran while rebuilding the teacher at startup.")
+    error: str | None = None
+
+
+class RecentResult(BaseModel):
+    task_id: str
+    params: Task
+    reward: float
+    success: bool | None
+    length: int | None
+    received_at: float
+
+
+class CurriculumState(BaseModel):
+    curriculum: CurriculumInfo
+    teacher: dict[str, Any] = Field(description="The teacher's own description (kind-specific).")
+    fits: list[FitEvent] = Field(description="Recent fits, oldest first.")
+    recent_results: list[RecentResult] = Field(description="Recent results, oldest first.")
+
+
+class Health(BaseModel):
+    status: Literal["ok"] = "ok"
+    curricula: int
+
+
+class ErrorMessage(BaseModel):
+    detail: str

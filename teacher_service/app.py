@@ -1,0 +1,59 @@
+"""The FastAPI application: ``create_app(settings)`` wires the store, the curricula and the routes.
+
+The service is one process with one event loop (SQLite and the live teachers are its state): run
+it with a single uvicorn worker.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.exceptions import RequestValidationError
+
+from teacher_service.api.errors import validation_error_handler
+from teacher_service.api.routes import curricula, health
+from teacher_service.core.config import Settings
+from teacher_service.curricula import CurriculumRegistry
+from teacher_service.dashboard import router as dashboard_router
+from teacher_service.metrics import MetricsMiddleware, ServiceMetrics
+from teacher_service.store import Store
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    service_metrics = ServiceMetrics()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        store = Store(settings.db, settings.sqlite_synchronous)
+        registry = CurriculumRegistry(store, service_metrics, settings)
+        try:
+            registry.restore()
+        except BaseException:
+            store.close()
+            raise
+        registry.start(asyncio.get_running_loop())
+        app.state.registry = registry
+        try:
+            yield
+        finally:
+            registry.close()
+
+    app = FastAPI(
+        title="kuka-curriculum teacher service",
+        summary="Hands each episode a task from a curriculum teacher and learns from the results.",
+        version="1.0.0",
+        lifespan=lifespan,
+        max_body_size=settings.max_body_bytes,
+    )
+    app.state.settings = settings
+    app.state.metrics = service_metrics
+    app.add_exception_handler(RequestValidationError, validation_error_handler)
+    app.include_router(health.router)
+    app.include_router(curricula.router)
+    app.include_router(dashboard_router)
+    app.add_middleware(MetricsMiddleware, metrics=service_metrics)
+    return app

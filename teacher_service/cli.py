@@ -1,0 +1,40 @@
+"""``kuka-curriculum serve``: run the teacher service."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from teacher_service.core.config import Settings
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", help="interface to bind (default 127.0.0.1, env KC_HOST)")
+    parser.add_argument("--port", type=int, help="port (default 8000, env KC_PORT)")
+    parser.add_argument("--db", type=Path, help="SQLite database (default runs/teacher.db, env KC_DB)")
+    parser.add_argument("--log-level", choices=["critical", "error", "warning", "info", "debug"],
+                        help="log level (default info, env KC_LOG_LEVEL)")
+
+
+def settings_from(args: argparse.Namespace) -> Settings:
+    """Flags override ``KC_`` environment variables, which override the defaults."""
+    flags = {"host": args.host, "port": args.port, "db": args.db, "log_level": args.log_level}
+    return Settings(**{name: value for name, value in flags.items() if value is not None})
+
+
+def run(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from teacher_service.app import create_app
+
+    settings = settings_from(args)
+    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    uvicorn.run(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        log_level=settings.log_level,
+        access_log=False,
+    )
+    return 0

@@ -1,0 +1,407 @@
+"""The live curricula: one teacher each, its counters, and the fits it needs.
+
+Threading model: a teacher is only ever touched on the event loop thread. Requests sample from it
+and the store's commit callbacks feed it results, both on the loop; a due fit runs in the fit
+process as a pure job, and its output comes back to the loop to be installed. So no teacher needs
+a lock, sampling always uses the last installed model, and a refit never holds up a request.
+
+What is stored lets a restart rebuild the exact live state: each task row carries how many results
+the teacher had learned from when it was drawn, and each fit row how many tasks and results it
+had seen when it was installed. The replay feeds results back in their stored order, drawing (and
+dropping) tasks and installing fits at the same points, so the rebuilt teacher has the same model,
+the same counters and the same per-task bookkeeping, and draws the same next tasks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from tqdm import tqdm
+
+from common.schemas import (
+    CurriculumCounters,
+    CurriculumInfo,
+    CurriculumSpec,
+    CurriculumState,
+    FitEvent,
+    IssuedTask,
+    RecentResult,
+    ResultAck,
+    ResultItem,
+)
+from common.task_space import Task
+from teacher_service.core.config import Settings
+from teacher_service.fits import FitOutcome, FitRunner, run_fit
+from teacher_service.metrics import ServiceMetrics
+from teacher_service.store import (
+    INSERT_CURRICULUM,
+    INSERT_FIT,
+    INSERT_RESULT,
+    INSERT_TASK,
+    Store,
+    StoredCurriculum,
+    StoredFit,
+    StoredTask,
+)
+from teacher_service.teachers import EpisodeResult, FitJob, Teacher, make_teacher
+
+log = logging.getLogger(__name__)
+
+FIT_HISTORY = 200
+"""Fit events kept per curriculum for ``/state``."""
+
+
+class UnknownCurriculum(KeyError):
+    """No curriculum has this name."""
+
+
+class CurriculumConflict(Exception):
+    """The name is taken by a curriculum with a different configuration."""
+
+
+class InvalidResults(ValueError):
+    """Some result items cannot be applied; ``errors`` are FastAPI-style validation errors."""
+
+    def __init__(self, errors: list[dict[str, Any]]) -> None:
+        super().__init__(f"{len(errors)} invalid result(s)")
+        self.errors = errors
+
+
+class Curriculum:
+    """One named teacher over one task space, with the bookkeeping the API reports."""
+
+    def __init__(
+        self,
+        curriculum_id: int,
+        name: str,
+        spec: CurriculumSpec,
+        created_at: float,
+        store: Store,
+        fits: FitRunner,
+        metrics: ServiceMetrics,
+        settings: Settings,
+    ) -> None:
+        self.id = curriculum_id
+        self.name = name
+        self.spec = spec
+        self.space = spec.task_space()
+        self.teacher: Teacher = make_teacher(spec.teacher, self.space, spec.seed, spec.params)
+        self.created_at = created_at
+        self.tasks_issued = 0
+        self.issued_through = 0
+        """One past the highest task index on disk: task ids below it have been handed out."""
+        self.results_received = 0
+        self.outstanding: dict[int, Task] = {}
+        self.recent_results: deque[RecentResult] = deque(maxlen=settings.recent_results)
+        self.fit_events: deque[FitEvent] = deque(maxlen=FIT_HISTORY)
+        self.fits_completed = 0
+        self.fits_pending = 0
+        self.last_fit_at: float | None = None
+        self._store = store
+        self._fits = fits
+        self._tasks_counter = metrics.tasks_issued.labels(name)
+        self._accepted_counter = metrics.results.labels(name, "accepted")
+        self._duplicate_counter = metrics.results.labels(name, "duplicate")
+        self._fits_counter = metrics.fits.labels(name)
+        self._fit_errors_counter = metrics.fit_errors.labels(name)
+        self._fit_seconds = metrics.fit_seconds.labels(name)
+        self._fits_pending_gauge = metrics.fits_pending.labels(name)
+        self._rate_window = settings.rate_window_s
+        self._counting_since = time.time()
+        self._arrivals: deque[tuple[float, int]] = deque()
+
+    def task_id(self, index: int) -> str:
+        return f"{self.name}:{index}"
+
+    def task_index(self, task_id: str) -> int | None:
+        """The index behind one of this curriculum's issued task ids, else ``None``."""
+        name, _, digits = task_id.rpartition(":")
+        if name != self.name or not (digits.isascii() and digits.isdigit()) or digits != str(int(digits)):
+            return None
+        index = int(digits)
+        return index if index < self.issued_through else None
+
+    async def issue(self, count: int) -> list[IssuedTask]:
+        """Draw tasks and answer once they are on disk."""
+        first = self.teacher.tasks_sampled
+        results_seen = self.teacher.results_seen
+        tasks = [self.space.validate(task) for task in self.teacher.sample(count)]
+        issued_at = time.time()
+        rows = [(self.id, first + i, json.dumps(task), results_seen, issued_at) for i, task in enumerate(tasks)]
+
+        def stored() -> None:
+            self.outstanding.update(zip(range(first, first + count), tasks))
+            self.tasks_issued += count
+            self.issued_through = max(self.issued_through, first + count)
+            self._tasks_counter.inc(count)
+
+        await self._store.write([(INSERT_TASK, rows)], on_commit=stored)
+        return [IssuedTask(task_id=self.task_id(first + i), params=task) for i, task in enumerate(tasks)]
+
+    async def report(self, items: list[ResultItem]) -> ResultAck:
+        """Store new results, then learn from them; all or nothing.
+
+        A result for a task that already has one (or appears twice here) is a duplicate and is
+        ignored, which makes retries safe. Results are claimed before the write so a concurrent
+        request cannot apply the same task twice, and released again if the write fails.
+        """
+        errors: list[dict[str, Any]] = []
+        claimed: dict[int, ResultItem] = {}
+        duplicates = 0
+        for position, item in enumerate(items):
+            index = self.task_index(item.task_id)
+            if index is None:
+                errors.append({
+                    "loc": ["body", "results", position, "task_id"],
+                    "msg": f"unknown task id {item.task_id!r}: curriculum {self.name!r} never issued it",
+                    "type": "unknown_task",
+                    "input": item.task_id,
+                })
+            elif index in claimed or index not in self.outstanding:
+                duplicates += 1
+            else:
+                claimed[index] = item
+        if errors:
+            raise InvalidResults(errors)
+        self._duplicate_counter.inc(duplicates)
+        if not claimed:
+            return ResultAck(accepted=0, duplicates=duplicates)
+        tasks = {index: self.outstanding.pop(index) for index in claimed}
+        received_at = time.time()
+        rows = [
+            (self.id, index, item.reward, item.success, item.length, received_at) for index, item in claimed.items()
+        ]
+
+        def stored() -> None:
+            for index, item in claimed.items():
+                job = self._learn(index, tasks[index], item.reward, item.success, item.length, received_at)
+                if job is not None:
+                    self._submit_fit(job)
+            self._count_arrivals(received_at, len(claimed))
+            self._accepted_counter.inc(len(claimed))
+
+        def not_stored() -> None:
+            self.outstanding.update(tasks)
+
+        await self._store.write([(INSERT_RESULT, rows)], on_commit=stored, on_abort=not_stored)
+        return ResultAck(accepted=len(claimed), duplicates=duplicates)
+
+    def _learn(
+        self, index: int, task: Task, reward: float, success: bool | None, length: int | None, received_at: float
+    ) -> FitJob | None:
+        job = self.teacher.update(EpisodeResult(task, reward, success, length))
+        self.results_received += 1
+        self.recent_results.append(
+            RecentResult(task_id=self.task_id(index), params=task, reward=reward, success=success, length=length,
+                         received_at=received_at)
+        )
+        return job
+
+    def _submit_fit(self, job: FitJob) -> None:
+        self.fits_pending += 1
+        self._fits_pending_gauge.inc()
+        self._fits.submit(job, self._install_live)
+
+    def _install_live(self, outcome: FitOutcome) -> None:
+        self.fits_pending -= 1
+        self._fits_pending_gauge.dec()
+        self._install(outcome, replayed=False)
+        self._store.write_later([(INSERT_FIT, [self._fit_row(outcome)])])
+
+    def _install(self, outcome: FitOutcome, replayed: bool) -> None:
+        """Adopt a fit's model; a failed fit or install is recorded and the previous model stays."""
+        error = outcome.error
+        if error is None:
+            try:
+                self.teacher.install(outcome.output)
+            except Exception as exception:
+                log.exception("curriculum %r: installing fit %d failed", self.name, outcome.index)
+                error = f"install failed: {type(exception).__name__}: {exception}"
+        if error is None:
+            self._fits_counter.inc()
+            self._fit_seconds.observe(outcome.finished_at - outcome.started_at)
+        else:
+            self._fit_errors_counter.inc()
+        self.fits_completed += 1
+        self.last_fit_at = outcome.finished_at
+        self.fit_events.append(
+            FitEvent(index=outcome.index, started_at=outcome.started_at, finished_at=outcome.finished_at,
+                     duration_s=outcome.finished_at - outcome.started_at, replayed=replayed, error=error)
+        )
+
+    def _fit_row(self, outcome: FitOutcome) -> tuple[Any, ...]:
+        return (self.id, outcome.index, self.teacher.tasks_sampled, self.teacher.results_seen,
+                outcome.started_at, outcome.finished_at, outcome.error)
+
+    def _count_arrivals(self, now: float, count: int) -> None:
+        self._arrivals.append((now, count))
+        while self._arrivals and self._arrivals[0][0] < now - self._rate_window:
+            self._arrivals.popleft()
+
+    def results_per_second(self, now: float) -> float:
+        recent = sum(count for at, count in self._arrivals if at >= now - self._rate_window)
+        return recent / max(min(self._rate_window, now - self._counting_since), 1e-3)
+
+    def info(self) -> CurriculumInfo:
+        now = time.time()
+        return CurriculumInfo(
+            name=self.name,
+            config=self.spec,
+            created_at=self.created_at,
+            counters=CurriculumCounters(
+                tasks_issued=self.tasks_issued,
+                results_received=self.results_received,
+                results_per_second=self.results_per_second(now),
+                tasks_outstanding=len(self.outstanding),
+                fits_completed=self.fits_completed,
+                fits_pending=self.fits_pending,
+                last_fit_at=self.last_fit_at,
+            ),
+        )
+
+    def state(self, recent: int) -> CurriculumState:
+        results = list(self.recent_results)[-recent:] if recent else []
+        return CurriculumState(
+            curriculum=self.info(),
+            teacher=self.teacher.state(),
+            fits=list(self.fit_events),
+            recent_results=results,
+        )
+
+    def replay(self) -> None:
+        """Rebuild the teacher from the store (see the module docstring); runs fits in place."""
+        store, teacher = self._store, self.teacher
+        tasks = store.tasks(self.id)
+        self.tasks_issued = len(tasks)
+        self.issued_through = tasks[-1].index + 1 if tasks else 0
+        recorded_fits = {fit.index: fit for fit in store.fits(self.id)}
+        due: deque[FitJob] = deque()
+        drawn_before = _tasks_drawn_before(tasks)
+
+        def draw_to(count: int) -> None:
+            if count > teacher.tasks_sampled:
+                teacher.skip(count - teacher.tasks_sampled)
+
+        def install_recorded(results_applied: int) -> None:
+            while due and (fit := recorded_fits.get(due[0].index)) and fit.results_seen <= results_applied:
+                draw_to(fit.tasks_sampled)
+                self._install(_rerun(due.popleft(), fit), replayed=True)
+
+        results = store.results(self.id)
+        total = store.result_count(self.id)
+        for applied, result in enumerate(tqdm(results, total=total, desc=f"replaying {self.name}", unit="result",
+                                              disable=None, leave=False)):
+            install_recorded(applied)
+            draw_to(drawn_before(applied))
+            job = self._learn(result.task_index, result.task, result.reward, result.success, result.length,
+                              result.received_at)
+            if job is not None:
+                due.append(job)
+        install_recorded(total)
+        draw_to(self.issued_through)
+        unrecorded = []
+        while due:
+            outcome = run_fit(due.popleft())
+            self._install(outcome, replayed=True)
+            unrecorded.append(self._fit_row(outcome))
+        if unrecorded:
+            store.write_now([(INSERT_FIT, unrecorded)])
+        self.outstanding = dict(store.outstanding_tasks(self.id))
+
+
+def _rerun(job: FitJob, recorded: StoredFit) -> FitOutcome:
+    """Run a job again, keeping the live run's timing so the fit history survives restarts."""
+    outcome = run_fit(job)
+    return FitOutcome(outcome.index, outcome.output, outcome.error, recorded.started_at, recorded.finished_at)
+
+
+def _tasks_drawn_before(tasks: list[StoredTask]) -> Callable[[int], int]:
+    """Maps a count of applied results to how many tasks the live teacher had drawn by then."""
+    marks = iter(tasks)
+    drawn = 0
+    pending = next(marks, None)
+
+    def drawn_before(results_applied: int) -> int:
+        nonlocal drawn, pending
+        while pending is not None and pending.results_seen <= results_applied:
+            drawn = pending.index + 1
+            pending = next(marks, None)
+        return drawn
+
+    return drawn_before
+
+
+class CurriculumRegistry:
+    """Every curriculum of one service, loaded from and written to one store."""
+
+    def __init__(self, store: Store, metrics: ServiceMetrics, settings: Settings) -> None:
+        self._store = store
+        self._metrics = metrics
+        self._settings = settings
+        self._fits = FitRunner()
+        self._curricula: dict[str, Curriculum] = {}
+
+    def restore(self) -> None:
+        """Rebuild every stored curriculum; call before ``start``."""
+        for stored in self._store.curricula():
+            curriculum = self._build(stored)
+            curriculum.replay()
+            self._curricula[stored.name] = curriculum
+            log.info("restored curriculum %r: %d tasks, %d results, %d fits", stored.name,
+                     curriculum.tasks_issued, curriculum.results_received, curriculum.fits_completed)
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._store.start(loop)
+        self._fits.start(loop)
+
+    def close(self) -> None:
+        self._fits.close()
+        self._store.close()
+
+    def __len__(self) -> int:
+        return len(self._curricula)
+
+    def __iter__(self) -> Iterator[Curriculum]:
+        return iter(list(self._curricula.values()))
+
+    def get(self, name: str) -> Curriculum:
+        try:
+            return self._curricula[name]
+        except KeyError:
+            raise UnknownCurriculum(name) from None
+
+    async def create(self, name: str, spec: CurriculumSpec) -> tuple[Curriculum, bool]:
+        """Create a curriculum, or return the identical one that exists (``created`` False).
+
+        Raises ``CurriculumConflict`` when the name holds a different one, ``ValueError`` when the
+        teacher rejects its parameters."""
+        existing = self._curricula.get(name)
+        if existing is not None:
+            if existing.spec != spec:
+                raise CurriculumConflict(
+                    f"curriculum {name!r} already exists with a different configuration "
+                    f"(teacher {existing.spec.teacher!r}, seed {existing.spec.seed}); choose another name"
+                )
+            return existing, False
+        curriculum_id = max((c.id for c in self._curricula.values()), default=0) + 1
+        curriculum = self._build(StoredCurriculum(curriculum_id, name, spec.model_dump_json(), time.time()))
+        # Registered before the write so a concurrent PUT sees it; the store's FIFO order puts this
+        # row before any task written for it.
+        self._curricula[name] = curriculum
+        await self._store.write(
+            [(INSERT_CURRICULUM, [(curriculum_id, name, spec.model_dump_json(), curriculum.created_at)])],
+            on_abort=lambda: self._curricula.pop(name, None),
+        )
+        return curriculum, True
+
+    def _build(self, stored: StoredCurriculum) -> Curriculum:
+        return Curriculum(
+            stored.id, stored.name, CurriculumSpec.model_validate_json(stored.spec), stored.created_at,
+            self._store, self._fits, self._metrics, self._settings,
+        )

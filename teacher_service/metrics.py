@@ -1,0 +1,72 @@
+"""Prometheus metrics of one service instance, and the ASGI middleware that times requests.
+
+Each app gets its own registry so several apps (tests) can live in one process.
+"""
+
+from __future__ import annotations
+
+import time
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+_LATENCY_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5)
+_FIT_BUCKETS = (0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0)
+
+
+class ServiceMetrics:
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry()
+        self.requests = Counter(
+            "kc_http_requests", "HTTP requests served.", ["method", "route", "status"], registry=self.registry
+        )
+        self.request_seconds = Histogram(
+            "kc_http_request_duration_seconds", "Time to answer a request.", ["method", "route"],
+            buckets=_LATENCY_BUCKETS, registry=self.registry,
+        )
+        self.tasks_issued = Counter("kc_tasks_issued", "Tasks handed out.", ["curriculum"], registry=self.registry)
+        self.results = Counter(
+            "kc_results", "Results received, by outcome (accepted or duplicate).", ["curriculum", "outcome"],
+            registry=self.registry,
+        )
+        self.fits = Counter("kc_fits", "Teacher model fits installed.", ["curriculum"], registry=self.registry)
+        self.fit_errors = Counter("kc_fit_errors", "Teacher model fits that raised.", ["curriculum"],
+                                  registry=self.registry)
+        self.fit_seconds = Histogram(
+            "kc_fit_duration_seconds", "Time one teacher model fit took.", ["curriculum"],
+            buckets=_FIT_BUCKETS, registry=self.registry,
+        )
+        self.fits_pending = Gauge("kc_fits_pending", "Fits queued or running.", ["curriculum"],
+                                  registry=self.registry)
+
+    def render(self) -> bytes:
+        return generate_latest(self.registry)
+
+
+class MetricsMiddleware:
+    """Counts and times every HTTP request by its route template (not its raw path)."""
+
+    def __init__(self, app: ASGIApp, metrics: ServiceMetrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = time.perf_counter()
+        status = 500
+
+        async def send_and_watch(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_and_watch)
+        finally:
+            route = getattr(scope.get("route"), "path", "unmatched")
+            method = scope["method"]
+            self.metrics.requests.labels(method, route, str(status)).inc()
+            self.metrics.request_seconds.labels(method, route).observe(time.perf_counter() - started)

@@ -1,0 +1,116 @@
+"""Run the teacher service as a child process on this machine.
+
+For a training run that starts its own teacher, and for tests that need a real server they can
+kill. The child runs ``kuka-curriculum serve`` with the same interpreter.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from types import TracebackType
+
+import httpx
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A port that was free a moment ago (the OS picks it)."""
+    with socket.socket() as probe:
+        probe.bind((host, 0))
+        return probe.getsockname()[1]
+
+
+class ServiceProcess:
+    """``kuka-curriculum serve`` on ``db``; ``start`` waits until ``/healthz`` answers.
+
+    The port is chosen once, so a restart (``kill`` then ``start``) serves at the same URL.
+    The child's output goes to ``log_path`` (next to the database by default).
+    """
+
+    def __init__(
+        self,
+        db: Path,
+        *,
+        host: str = "127.0.0.1",
+        port: int | None = None,
+        env: Mapping[str, str] | None = None,
+        log_path: Path | None = None,
+    ) -> None:
+        self.db = Path(db)
+        self.host = host
+        self.port = port or free_port(host)
+        self.env = {**os.environ, **(env or {})}
+        self.log_path = log_path or self.db.with_suffix(".log")
+        self._process: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    @property
+    def pid(self) -> int:
+        if self._process is None:
+            raise RuntimeError("the service is not running")
+        return self._process.pid
+
+    def start(self, timeout: float = 60.0) -> ServiceProcess:
+        if self._process is not None and self._process.poll() is None:
+            raise RuntimeError(f"the service at {self.url} is already running")
+        self.db.parent.mkdir(parents=True, exist_ok=True)
+        command = [sys.executable, "-m", "common.cli", "serve", "--host", self.host, "--port", str(self.port),
+                   "--db", str(self.db), "--log-level", "warning"]
+        with self.log_path.open("ab") as log:
+            self._process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=self.env)
+        self._wait_healthy(timeout)
+        return self
+
+    def _wait_healthy(self, timeout: float) -> None:
+        assert self._process is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self._process.poll() is not None:
+                raise RuntimeError(f"the service exited with code {self._process.returncode}:\n{self._log_tail()}")
+            try:
+                if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            time.sleep(0.05)
+        self.kill()
+        raise RuntimeError(f"the service did not answer /healthz within {timeout} s:\n{self._log_tail()}")
+
+    def _log_tail(self, lines: int = 30) -> str:
+        return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+
+    def stop(self, timeout: float = 30.0) -> None:
+        """Shut down gracefully (SIGTERM), killing the process if it does not exit in time."""
+        if self._process is None:
+            return
+        self._process.send_signal(signal.SIGTERM)
+        try:
+            self._process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+        self._process = None
+
+    def kill(self) -> None:
+        """Die at once (SIGKILL), as in a crash: nothing is flushed or shut down."""
+        if self._process is None:
+            return
+        self._process.kill()
+        self._process.wait()
+        self._process = None
+
+    def __enter__(self) -> ServiceProcess:
+        return self.start()
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, traceback: TracebackType | None
+    ) -> None:
+        self.stop()

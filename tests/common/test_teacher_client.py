@@ -1,0 +1,155 @@
+"""The teacher client against a real service process: batching, outages, restarts and errors.
+
+The module shares one service (tests that kill it start it again); each test has its own curriculum.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import httpx
+import pytest
+
+from common.task_space import KUKA_TASK_SPACE
+from common.teacher_client import (
+    Assignment,
+    Backoff,
+    TeacherClient,
+    TeacherRequestError,
+    TeacherUnavailable,
+)
+from teacher_service.process import ServiceProcess, free_port
+
+FAST_RETRIES = Backoff(base_s=0.01, cap_s=0.2)
+TOKEN = "client-test-token"
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServiceProcess]:
+    with ServiceProcess(tmp_path_factory.mktemp("client") / "teacher.db", env={"KC_TEACHER_TOKEN": TOKEN}) as running:
+        yield running
+
+
+def _client(service: ServiceProcess, curriculum: str, token: str = TOKEN, **options) -> TeacherClient:
+    return TeacherClient(service.url, curriculum, token=token, backoff=FAST_RETRIES, **options)
+
+
+def _counters(service: ServiceProcess, curriculum: str) -> dict:
+    return httpx.get(f"{service.url}/api/v1/curricula/{curriculum}").json()["counters"]
+
+
+def test_register_draw_and_report(service):
+    with _client(service, "basic", prefetch=4) as client:
+        info = client.register("random", KUKA_TASK_SPACE, seed=5)
+        assert info.config.teacher == "random" and info.counters.tasks_issued == 0
+        assert client.register("random", KUKA_TASK_SPACE, seed=5).created_at == info.created_at
+        with pytest.raises(TeacherRequestError) as conflict:
+            client.register("random", KUKA_TASK_SPACE, seed=6)
+        assert conflict.value.status == 409 and "different configuration" in str(conflict.value)
+
+        first = client.next_task()
+        assert not first.offline and KUKA_TASK_SPACE.validate(first.params) == first.params
+        assert _counters(service, "basic")["tasks_issued"] == 4, "one request fetches a prefetch batch"
+        assignments = [first] + [client.next_task() for _ in range(39)]
+        assert len({a.task_id for a in assignments}) == 40
+
+        def report(share: list[Assignment]) -> None:
+            for assignment in share:
+                client.report(assignment, reward=assignment.params["rnd_obj_x"], success=False, length=7)
+
+        threads = [threading.Thread(target=report, args=(assignments[i::4],)) for i in range(4)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        assert client.flush(timeout=30)
+        assert client.pending == 0 and client.delivered == 40
+        assert client.info().counters.results_received == 40
+        recent = client.state(recent=5).recent_results
+        assert [r.task_id for r in recent] == [r.task_id for r in client.state().recent_results[-5:]]
+    counters = _counters(service, "basic")
+    assert counters["results_received"] == 40 and counters["tasks_outstanding"] == 0
+
+
+def test_no_result_is_lost_across_a_service_restart(service):
+    with _client(service, "restart", prefetch=16) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        assignments = [client.next_task() for _ in range(16)]
+        for assignment in assignments[:6]:
+            client.report(assignment, reward=1.0)
+        assert client.flush(timeout=30)
+
+        service.kill()
+        for assignment in assignments[6:]:
+            client.report(assignment, reward=2.0)
+        assert not client.flush(timeout=0.5)
+        assert client.pending == 10
+
+        service.start()
+        assert client.flush(timeout=30)
+        assert client.delivered == 16
+    state = httpx.get(f"{service.url}/api/v1/curricula/restart/state").json()
+    assert state["curriculum"]["counters"]["results_received"] == 16
+    assert sorted(r["task_id"] for r in state["recent_results"]) == sorted(a.task_id for a in assignments)
+
+
+def test_offline_assignments_keep_a_worker_busy_while_the_teacher_is_down(service):
+    with _client(service, "offline", prefetch=3, task_timeout=1.0) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        issued = [client.next_task() for _ in range(3)]
+        service.kill()
+        waited = time.monotonic()
+        offline = [client.next_task()]
+        assert time.monotonic() - waited > 0.5, "the first miss keeps retrying for most of task_timeout"
+        waited = time.monotonic()
+        offline += [client.next_task() for _ in range(3)]
+        assert time.monotonic() - waited < 0.5, "later misses do not wait again"
+        assert all(a.offline for a in offline)
+        assert [a.params for a in offline] == [issued[0].params, issued[1].params, issued[2].params,
+                                               issued[0].params]
+        client.report(offline[0], reward=3.0)
+        assert client.offline_results == 1 and client.pending == 0
+
+        service.start()
+        back = client.next_task()
+        assert not back.offline
+        client.report(back, reward=1.0)
+        assert client.flush(timeout=30)
+    assert _counters(service, "offline")["results_received"] == 1
+
+
+def test_no_task_at_all_is_an_error_not_a_hang():
+    with TeacherClient(f"http://127.0.0.1:{free_port()}", "kuka", task_timeout=0.3, backoff=FAST_RETRIES) as client:
+        with pytest.raises(TeacherUnavailable, match="none issued before"):
+            client.next_task()
+
+
+def test_invalid_results_are_dropped_and_the_rest_delivered(service):
+    with _client(service, "invalid") as client:
+        client.register("random", KUKA_TASK_SPACE)
+        good = client.next_task()
+        client.report(Assignment("invalid:999999", good.params), reward=1.0)
+        client.report(good, reward=1.0)
+        assert client.flush(timeout=30)
+        assert client.rejected == 1 and client.delivered == 1
+        with pytest.raises(ValueError, match="finite"):
+            client.report(good, reward=float("nan"))
+    assert _counters(service, "invalid")["results_received"] == 1
+
+
+def test_errors_retrying_cannot_fix_are_raised(service):
+    with _client(service, "refused", token="wrong") as client:
+        with pytest.raises(TeacherRequestError) as refused:
+            client.register("random", KUKA_TASK_SPACE)
+        assert refused.value.status == 401
+    with _client(service, "ghost") as client:
+        with pytest.raises(TeacherRequestError) as missing:
+            client.next_task()
+        assert missing.value.status == 404 and "ghost" in str(missing.value)
+        client.report(Assignment("ghost:0", KUKA_TASK_SPACE.hardest()), reward=0.0)
+        with pytest.raises(TeacherRequestError, match="404"):
+            client.flush(timeout=30)
+        assert client.pending == 1, "an undeliverable result is kept, not silently dropped"
+        assert client.close(timeout=0.1) == 1

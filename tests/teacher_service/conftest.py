@@ -1,0 +1,50 @@
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from common.schemas import ParameterSpec
+from common.task_space import KUKA_TASK_SPACE
+from teacher_service.process import ServiceProcess
+
+
+@pytest.fixture(scope="session")
+def write_token() -> str:
+    return "service-test-token"
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory, write_token: str) -> Iterator[ServiceProcess]:
+    """A real service on a free localhost port that guards writes with ``write_token``; a module's
+    tests share it and each uses its own curricula."""
+    db = tmp_path_factory.mktemp("teacher") / "teacher.db"
+    with ServiceProcess(db, env={"KC_TEACHER_TOKEN": write_token}) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def http(service: ServiceProcess, write_token: str) -> Iterator[httpx.Client]:
+    """Talks to ``/api/v1`` with the write token."""
+    headers = {"Authorization": f"Bearer {write_token}"}
+    with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=30.0) as client:
+        yield client
+
+
+@pytest.fixture(scope="session")
+def kuka_space() -> list[dict[str, Any]]:
+    return [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
+
+
+@pytest.fixture(scope="session")
+def fit_processes() -> Callable[[int], list[int]]:
+    """Finds a service's fit processes: its multiprocessing children other than the resource tracker."""
+
+    def find(service_pid: int) -> list[int]:
+        children = []
+        for thread in Path(f"/proc/{service_pid}/task").iterdir():
+            children += [int(pid) for pid in (thread / "children").read_text().split()]
+        return [pid for pid in children if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+
+    return find

@@ -1,0 +1,317 @@
+"""The live dashboard in a real headless Chromium against a real teacher service process.
+
+The module starts ``kuka-curriculum serve`` on a free port with its own SQLite file; each test
+feeds its own curriculum episodes over HTTP as rollout workers would, and reads back what the page
+drew from Plotly's own trace data. The service guards writes with a token; the pages, which only
+read, work without one. The ALP-GMM page's screenshot is saved to ``test-artifacts/dashboard.png``.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from playwright.sync_api import Browser, Page, sync_playwright
+
+from common.schemas import API_PREFIX, ParameterSpec
+from common.task_space import KUKA_TASK_SPACE
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
+WRITE_TOKEN = "dashboard-test-token"
+WRITES = {"Authorization": f"Bearer {WRITE_TOKEN}"}
+FIT_RATE = 50
+EPISODES = 3 * FIT_RATE
+PAGE_TIMEOUT_MS = 20_000
+
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Debian's chromium (.ci/run installs it)")
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@dataclass
+class TeacherService:
+    """``kuka-curriculum serve`` in a child process; ``stop`` then ``start`` is a restart on the
+    same port and database."""
+
+    db: Path
+    log: Path
+    port: int = field(default_factory=_free_port)
+    process: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self) -> None:
+        command = [sys.executable, "-m", "common.cli", "serve", "--port", str(self.port), "--db", str(self.db),
+                   "--log-level", "warning"]
+        with self.log.open("ab") as log:
+            self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                            env={**os.environ, "KC_TEACHER_TOKEN": WRITE_TOKEN})
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"the teacher service exited with {self.process.returncode}:\n{self.log.read_text()}")
+            try:
+                if httpx.get(f"{self.url}/healthz", timeout=1).status_code == 200:
+                    return
+            except httpx.TransportError:
+                time.sleep(0.2)
+        raise RuntimeError(f"the teacher service did not answer within 60 s:\n{self.log.read_text()}")
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self.process = None
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TeacherService]:
+    """One service for the module; each test uses its own curriculum."""
+    folder = tmp_path_factory.mktemp("teacher")
+    teacher = TeacherService(db=folder / "teacher.db", log=folder / "service.log")
+    teacher.start()
+    try:
+        yield teacher
+    finally:
+        teacher.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+@dataclass
+class PageProblems:
+    """Everything a page did wrong: console errors, uncaught exceptions, failed or refused
+    requests, and requests that left the service."""
+
+    console: list[str] = field(default_factory=list)
+    exceptions: list[str] = field(default_factory=list)
+    failed: list[str] = field(default_factory=list)
+    http_errors: list[str] = field(default_factory=list)
+    foreign: list[str] = field(default_factory=list)
+
+
+def open_page(browser: Browser, url: str, service: TeacherService) -> tuple[Page, PageProblems]:
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.set_default_timeout(PAGE_TIMEOUT_MS)
+    problems = PageProblems()
+    page.on("console", lambda message: message.type == "error" and problems.console.append(message.text))
+    page.on("pageerror", lambda error: problems.exceptions.append(str(error)))
+    page.on("requestfailed", lambda request: problems.failed.append(f"{request.url}: {request.failure}"))
+    page.on("response", lambda response: response.status >= 400
+            and problems.http_errors.append(f"{response.status} {response.url}"))
+    page.on("request", lambda request: request.url.startswith((service.url, "data:"))
+            or problems.foreign.append(request.url))
+    page.goto(url)
+    return page, problems
+
+
+def create_curriculum(service: TeacherService, name: str, teacher: str, params: dict[str, Any]) -> None:
+    body = {"teacher": teacher, "space": SPACE, "params": params, "seed": 3}
+    response = httpx.put(f"{service.url}{API_PREFIX}/curricula/{name}", json=body, headers=WRITES, timeout=10)
+    assert response.status_code == 201, response.text
+
+
+def train(service: TeacherService, name: str, episodes: int, batch: int = FIT_RATE) -> list[dict[str, Any]]:
+    """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student."""
+    rng = np.random.default_rng(7)
+    played = []
+    with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula/{name}", headers=WRITES, timeout=10) as client:
+        for _ in range(episodes // batch):
+            tasks = client.post("/tasks", json={"count": batch}).raise_for_status().json()["tasks"]
+            results = []
+            for task in tasks:
+                hardness = np.mean([_difficulty(p, task["params"][p["name"]]) for p in SPACE])
+                reward = float(8.0 * (1.0 - hardness) - 2.0 + rng.normal(0.0, 0.5))
+                results.append({"task_id": task["task_id"], "reward": reward, "success": reward > 3.0, "length": 80})
+                played.append({"params": task["params"], "reward": reward})
+            assert client.post("/results", json={"results": results}).raise_for_status().json()["accepted"] == batch
+            wait_for_fits(service, name)
+    return played
+
+
+def _difficulty(parameter: dict[str, Any], value: float) -> float:
+    easy, hard = parameter["easiest"], parameter["hardest"]
+    return (value - easy) / (hard - easy)
+
+
+def wait_for_fits(service: TeacherService, name: str) -> dict[str, Any]:
+    """The curriculum's state once no fit is pending, so the next tasks come from the new model."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        state = httpx.get(f"{service.url}{API_PREFIX}/curricula/{name}/state", timeout=10).json()
+        if state["curriculum"]["counters"]["fits_pending"] == 0:
+            return state
+        time.sleep(0.1)
+    raise AssertionError(f"{name}: fits still pending after 60 s")
+
+
+def traces(page: Page, plot_id: str) -> dict[str, list[dict[str, Any]]]:
+    """The plot's Plotly traces grouped by their ``meta`` role."""
+    data = page.evaluate(
+        """id => (document.getElementById(id).data || []).map(t => ({
+            meta: t.meta, name: t.name,
+            x: Array.from(t.x || []), y: Array.from(t.y || []), z: t.z ? t.z.map(row => Array.from(row)) : null,
+        }))""",
+        plot_id,
+    )
+    grouped: dict[str, list[dict[str, Any]]] = {}
+    for trace in data:
+        grouped.setdefault(trace["meta"], []).append(trace)
+    return grouped
+
+
+def definitions(page: Page, selector: str) -> dict[str, str]:
+    """A definition list's terms and values as shown."""
+    box = page.locator(selector)
+    return dict(zip(box.locator("dt").all_inner_texts(), box.locator("dd").all_inner_texts(), strict=True))
+
+
+def select_dimensions(page: Page, x: str, y: str) -> None:
+    page.select_option("#dim-x", x)
+    page.select_option("#dim-y", y)
+
+
+def assert_ellipses_match(ellipses: list[dict[str, Any]], components: list[dict[str, Any]], x: str, y: str) -> None:
+    """Every drawn point lies on the 2-sigma contour of its component's (x, y) marginal."""
+    names = [p["name"] for p in SPACE]
+    i, j = names.index(x), names.index(y)
+    assert len(ellipses) == len(components) >= 1
+    for ellipse, component in zip(ellipses, components, strict=True):
+        covariance = np.array(component["covariance"])[np.ix_([i, j], [i, j])]
+        offsets = np.column_stack([ellipse["x"], ellipse["y"]]) - [component["mean"][x], component["mean"][y]]
+        mahalanobis_sq = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance), offsets)
+        np.testing.assert_allclose(mahalanobis_sq, 4.0, rtol=1e-6)
+
+
+def test_alp_gmm_dashboard_draws_the_posted_results_and_the_mixture(browser: Browser, service: TeacherService) -> None:
+    create_curriculum(service, "kuka-alp", "alp-gmm", {"fit_rate": FIT_RATE, "max_components": 4})
+    played = train(service, "kuka-alp", EPISODES)
+    state = wait_for_fits(service, "kuka-alp")
+    components = state["teacher"]["components"]
+
+    page, problems = open_page(browser, f"{service.url}/curricula/kuka-alp", service)
+    page.wait_for_function(
+        "() => (document.getElementById('space-plot').data || []).some(t => t.meta === 'tasks' && t.x.length > 0)"
+    )
+    assert page.inner_text("#kind") == "alp-gmm"
+    assert page.inner_text("#stat-tasks") == page.inner_text("#stat-results") == str(EPISODES)
+    assert page.inner_text("#stat-fits") == str(EPISODES // FIT_RATE)
+    assert page.inner_text("#stat-refit").endswith("ago")
+    assert definitions(page, "#params")["fit_rate"] == str(FIT_RATE)
+    assert page.locator("#banner").is_hidden()
+
+    progress = traces(page, "progress-plot")
+    np.testing.assert_allclose(progress["rewards"][0]["y"], [episode["reward"] for episode in played])
+    assert progress["rewards"][0]["x"] == list(range(1, EPISODES + 1))
+    assert {"reward-mean", "success-rate"} <= set(progress)
+
+    space = traces(page, "space-plot")
+    np.testing.assert_allclose(space["tasks"][0]["x"], [e["params"]["rnd_obj_x"] for e in played])
+    np.testing.assert_allclose(space["tasks"][0]["y"], [e["params"]["rnd_obj_y"] for e in played])
+    assert_ellipses_match(space["ellipse"], components, "rnd_obj_x", "rnd_obj_y")
+    np.testing.assert_allclose(traces(page, "alp-plot")["alp"][0]["y"], [c["mean_alp"] for c in components])
+
+    select_dimensions(page, "jp2", "bias_obj_y")
+    space = traces(page, "space-plot")
+    np.testing.assert_allclose(space["tasks"][0]["x"], [e["params"]["jp2"] for e in played])
+    np.testing.assert_allclose(space["tasks"][0]["y"], [e["params"]["bias_obj_y"] for e in played])
+    assert_ellipses_match(space["ellipse"], components, "jp2", "bias_obj_y")
+    assert page.locator("#space-plot .xtitle").text_content() == "jp2"
+    assert page.locator("#space-plot .ytitle").text_content() == "bias_obj_y"
+
+    strips = traces(page, "difficulty-plot")["difficulty"][0]
+    assert strips["y"] == [p["name"] for p in SPACE]
+    for parameter, shares in zip(SPACE, strips["z"], strict=True):
+        values = [_difficulty(parameter, e["params"][parameter["name"]]) for e in played]
+        expected, _ = np.histogram(np.clip(values, 0.0, 1.0), bins=len(shares), range=(0.0, 1.0))
+        np.testing.assert_allclose(shares, expected / len(played), atol=1e-9)
+
+    page.wait_for_timeout(3000)  # one more poll, which must redraw cleanly too
+    ARTIFACTS.mkdir(exist_ok=True)
+    select_dimensions(page, "rnd_obj_x", "rnd_obj_y")
+    page.screenshot(path=ARTIFACTS / "dashboard.png", full_page=True)
+    assert problems == PageProblems()
+    page.close()
+
+
+def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(browser: Browser, service: TeacherService) -> None:
+    create_curriculum(service, "kuka-manual", "manual", {"min_episodes": 10, "window": 10})
+    train(service, "kuka-manual", 20, batch=10)
+    teacher = httpx.get(f"{service.url}{API_PREFIX}/curricula/kuka-manual/state", timeout=10).json()["teacher"]
+
+    page, problems = open_page(browser, f"{service.url}/", service)
+    row = page.locator("#curricula-rows tr", has_text="kuka-manual")
+    row.wait_for()
+    assert "manual" in row.inner_text()
+    row.get_by_role("link", name="kuka-manual").click()
+    page.wait_for_url(f"{service.url}/curricula/kuka-manual")
+
+    lesson = page.locator("#lesson")
+    lesson.wait_for()
+    assert f"Lesson {teacher['lesson'] + 1} of {teacher['lessons']}" in lesson.inner_text()
+    shown = {name: float(value) for name, value in definitions(page, "#lesson").items()}
+    assert shown == pytest.approx(teacher["lesson_params"], abs=1e-3)
+    assert "fits no mixture" in page.inner_text("#alp-empty")
+    target = traces(page, "difficulty-plot")["difficulty-target"][0]
+    np.testing.assert_allclose(target["x"], [_difficulty(p, teacher["lesson_params"][p["name"]]) for p in SPACE])
+    assert problems == PageProblems()
+    page.close()
+
+
+def test_dashboard_survives_a_service_restart(browser: Browser, service: TeacherService) -> None:
+    create_curriculum(service, "kuka-restart", "random", {})
+    train(service, "kuka-restart", FIT_RATE)
+    page, problems = open_page(browser, f"{service.url}/curricula/kuka-restart", service)
+    page.wait_for_function(f"() => document.getElementById('stat-results').textContent === '{FIT_RATE}'")
+    page.evaluate("() => { window.sameDocument = true; }")
+
+    service.stop()
+    banner = page.locator("#banner")
+    banner.wait_for(state="visible")
+    assert "teacher unreachable" in banner.inner_text()
+    assert page.inner_text("#stat-results") == str(FIT_RATE), "the last picture stays on screen"
+
+    service.start()
+    banner.wait_for(state="hidden")
+    train(service, "kuka-restart", FIT_RATE)
+    page.wait_for_function(f"() => document.getElementById('stat-results').textContent === '{2 * FIT_RATE}'")
+    assert page.evaluate("() => window.sameDocument") is True, "the page was not reloaded"
+    assert problems.exceptions == [] and problems.foreign == []
+    page.close()
