@@ -13,6 +13,7 @@ import sys
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("common.demo", "Write a short GIF of the KUKA grasp environment under random actions."),
+    "train": ("learner.cli", "Train the PPO policy with distributed rollouts and a curriculum teacher."),
     "serve": ("teacher_service.cli", "Run the teacher service: curricula over HTTP, persisted in SQLite."),
 }
 

@@ -1,0 +1,146 @@
+"""The actor-critic network and the snapshot that carries it from the learner to the workers.
+
+A Gaussian policy with a state-independent log standard deviation; actions are sampled unbounded
+and clipped to the action box by whoever steps the environment, so log-probabilities stay exact.
+Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store) and
+run it through ``InferencePolicy``, which applies the observation normalisation it was trained with.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from common.normalizer import NormalizerState, RunningNormalizer
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """Everything needed to rebuild the network's shape on another process."""
+
+    obs_dim: int
+    action_dim: int
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    init_log_std: float = -0.5
+
+
+_LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def _layer(in_features: int, out_features: int, gain: float) -> nn.Linear:
+    layer = nn.Linear(in_features, out_features)
+    nn.init.orthogonal_(layer.weight, gain)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+def _mlp(sizes: list[int], output_gain: float) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for in_features, out_features in zip(sizes[:-2], sizes[1:-1]):
+        layers += [_layer(in_features, out_features, np.sqrt(2)), nn.Tanh()]
+    layers.append(_layer(sizes[-2], sizes[-1], output_gain))
+    return nn.Sequential(*layers)
+
+
+class ActorCritic(nn.Module):
+    """Separate tanh MLPs for the action mean and the value (sharing hurts PPO on control tasks)."""
+
+    def __init__(self, spec: PolicySpec) -> None:
+        super().__init__()
+        self.spec = spec
+        hidden = list(spec.hidden_sizes)
+        self.actor_mean = _mlp([spec.obs_dim, *hidden, spec.action_dim], output_gain=0.01)
+        self.critic = _mlp([spec.obs_dim, *hidden, 1], output_gain=1.0)
+        self.actor_log_std = nn.Parameter(torch.full((spec.action_dim,), float(spec.init_log_std)))
+
+    def value(self, observations: torch.Tensor) -> torch.Tensor:
+        return self.critic(observations).squeeze(-1)
+
+    def evaluate(
+        self, observations: torch.Tensor, actions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Return (log-probability, entropy, value) of given actions, with gradients."""
+        mean = self.actor_mean(observations)
+        entropy = (0.5 + _LOG_SQRT_2PI + self.actor_log_std).sum().expand(mean.shape[0])
+        return self._log_prob(mean, actions), entropy, self.value(observations)
+
+    def _log_prob(self, mean: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Diagonal Gaussian log-density, summed over action dimensions."""
+        log_std = self.actor_log_std
+        return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - _LOG_SQRT_2PI).sum(-1)
+
+
+@dataclass(frozen=True)
+class PolicySnapshot:
+    """The weights and normaliser statistics of one policy version, as plain numpy."""
+
+    spec: PolicySpec
+    weights: dict[str, np.ndarray]
+    normalizer: NormalizerState
+    obs_clip: float
+    version: int
+
+    @classmethod
+    def capture(cls, network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
+        weights = {name: tensor.detach().cpu().numpy().copy() for name, tensor in network.state_dict().items()}
+        return cls(network.spec, weights, normalizer.state(), normalizer.clip, version)
+
+
+class InferencePolicy:
+    """Numpy-in, numpy-out policy for stepping environments; no gradients.
+
+    At the batch sizes of environment stepping, torch's per-operation overhead, not arithmetic, is
+    the cost. So the actor and critic MLPs are fused into one block-diagonal MLP when weights are
+    loaded (half the operations), and the Gaussian's few element-wise operations run in numpy.
+    """
+
+    def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
+        self.spec = snapshot.spec
+        self.rng = np.random.default_rng(seed)
+        self.normalizer = RunningNormalizer(snapshot.spec.obs_dim, clip=snapshot.obs_clip)
+        self._network = ActorCritic(snapshot.spec)
+        self.version = -1
+        self.load(snapshot)
+
+    def load(self, snapshot: PolicySnapshot) -> None:
+        if snapshot.spec != self.spec:
+            raise ValueError(f"snapshot is for {snapshot.spec}, this policy is {self.spec}")
+        self._network.load_state_dict({name: torch.from_numpy(array) for name, array in snapshot.weights.items()})
+        actor = [m for m in self._network.actor_mean if isinstance(m, nn.Linear)]
+        critic = [m for m in self._network.critic if isinstance(m, nn.Linear)]
+        first = (torch.cat([actor[0].weight, critic[0].weight]), torch.cat([actor[0].bias, critic[0].bias]))
+        rest = [(torch.block_diag(a.weight, c.weight), torch.cat([a.bias, c.bias]))
+                for a, c in zip(actor[1:], critic[1:])]
+        self._layers = [(weight.detach().clone(), bias.detach().clone()) for weight, bias in [first, *rest]]
+        log_std = snapshot.weights["actor_log_std"].astype(np.float64)
+        self._std = np.exp(log_std).astype(np.float32)
+        self._log_density_offset = float((log_std + _LOG_SQRT_2PI).sum())
+        self.normalizer.load_state(snapshot.normalizer)
+        self.version = snapshot.version
+
+    @torch.inference_mode()
+    def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Action means (n, action_dim) and values (n,)."""
+        hidden = torch.from_numpy(self.normalizer.normalize(np.atleast_2d(observations)))
+        for weight, bias in self._layers[:-1]:
+            hidden = torch.tanh(F.linear(hidden, weight, bias))
+        output = F.linear(hidden, *self._layers[-1]).numpy()
+        return output[:, : self.spec.action_dim], output[:, self.spec.action_dim]
+
+    def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
+        mean, values = self._forward(observations)
+        if deterministic:
+            noise = np.zeros_like(mean)
+        else:
+            noise = self.rng.standard_normal(mean.shape, dtype=np.float32)
+        log_probs = (-0.5 * (noise * noise).sum(axis=-1) - self._log_density_offset).astype(np.float32)
+        return mean + self._std * noise, log_probs, values
+
+    def value(self, observations: np.ndarray) -> np.ndarray:
+        return self._forward(observations)[1]

@@ -1,0 +1,52 @@
+"""What a rollout worker hands the learner: a fixed-size batch of steps and the episodes it finished."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common.task_space import Task
+
+
+@dataclass(frozen=True)
+class EpisodeStats:
+    """One finished episode and the task it was played on.
+
+    ``task_id`` is the id the teacher issued the task under; None when no teacher issued it (an
+    evaluation episode, or an offline episode played while the teacher was unreachable).
+    """
+
+    task: Task
+    reward: float
+    success: bool
+    length: int
+    task_id: str | None = None
+
+
+@dataclass(frozen=True)
+class TrajectoryBatch:
+    """Time-major arrays of shape (steps, envs, ...) collected with one policy version.
+
+    Observations are raw (unnormalised): the learner normalises them with the statistics it sent
+    and then folds them into its running statistics. Episodes cross batch boundaries, so two arrays
+    carry what bootstrapping needs: ``final_values`` holds V(last observation) at steps where an
+    episode was truncated (zero elsewhere), and ``last_values`` holds V(next observation) for every
+    environment after the final step.
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray
+    log_probs: np.ndarray
+    values: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    final_values: np.ndarray
+    last_values: np.ndarray
+    policy_version: int
+    episodes: list[EpisodeStats] = field(default_factory=list)
+
+    @property
+    def num_steps(self) -> int:
+        return int(self.rewards.size)

@@ -1,0 +1,254 @@
+"""``kuka-curriculum train``: the whole training job from one command.
+
+It wires the parts together and owns everything a person sees: the run directory, the teacher
+service (started here unless ``--teacher-url`` names one), the Ray connection, the progress bar,
+and Ctrl-C or SIGTERM (the first: finish the iteration, checkpoint and stop; a second: stop now).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import re
+import signal
+import socket
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from learner.config import TEACHERS, TrainConfig
+
+DEFAULTS = TrainConfig()
+RAY_CONNECT_TIMEOUT_S = 5.0
+TEACHER_CONNECT_TIMEOUT_S = 10.0
+STATUS_TIMEOUT_S = 1.0
+TOKEN_VARIABLE = "KC_TEACHER_TOKEN"
+"""The teacher service's bearer token, read from the environment (never a flag: flags show in ``ps``)."""
+RAY_NAMESPACE = "kuka-curriculum"
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint."""
+
+
+class UsageError(Exception):
+    """Bad input or an unreachable service: reported in one line, exit code 2."""
+
+
+def _int_at_least(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text.replace("_", ""))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+_positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    run = parser.add_argument_group("run")
+    run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
+    run.add_argument("--total-steps", type=_positive_int,
+                     help=f"environment steps to train for (default {DEFAULTS.total_steps:_})")
+    run.add_argument("--workers", type=_positive_int, help=f"rollout actors (default {DEFAULTS.workers})")
+    run.add_argument("--envs-per-worker", type=_positive_int,
+                     help=f"environments per actor (default {DEFAULTS.envs_per_worker})")
+    run.add_argument("--rollout-length", type=_positive_int,
+                     help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})")
+    run.add_argument("--max-episode-steps", type=_positive_int,
+                     help=f"episode step limit (default {DEFAULTS.max_episode_steps})")
+    run.add_argument("--seed", type=int,
+                     help=f"seed for the network, environments and teacher (default {DEFAULTS.seed})")
+    run.add_argument("--checkpoint-every", type=_positive_int,
+                     help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})")
+    run.add_argument("--eval-every", type=_non_negative_int,
+                     help="iterations between evaluations on the hardest task, 0 for none "
+                          f"(default {DEFAULTS.eval_every})")
+    run.add_argument("--eval-episodes", type=_positive_int,
+                     help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})")
+    where = parser.add_argument_group("where")
+    where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
+    where.add_argument("--resume", action="store_true",
+                       help="continue the run in --run-dir from its latest checkpoint; "
+                            "flags given override its saved settings")
+    where.add_argument("--teacher-url", help="a running teacher service (default: start one for this run)")
+    where.add_argument("--ray-address", help="a running Ray cluster, host:port (default: start a local one)")
+
+
+_RUN_SETTINGS = ("teacher", "total_steps", "workers", "envs_per_worker", "max_episode_steps", "seed",
+                 "checkpoint_every", "eval_every", "eval_episodes")
+"""``TrainConfig`` fields settable by the flag of the same name."""
+
+
+def _config_from(args: argparse.Namespace, base: TrainConfig) -> TrainConfig:
+    """``base`` (the defaults, or a resumed run's saved config) with every flag given on top."""
+    overrides: dict[str, Any] = {name: getattr(args, name) for name in _RUN_SETTINGS if getattr(args, name) is not None}
+    ppo = base.ppo if args.rollout_length is None else replace(base.ppo, rollout_length=args.rollout_length)
+    return replace(base, **overrides, ppo=ppo)
+
+
+def curriculum_name(run_dir: Path) -> str:
+    """The run directory's name, made into a valid curriculum name: one run, one curriculum."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "-", run_dir.resolve().name).lstrip("_.-")
+    return (name or "run")[:64]
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        return _train(args)
+    except UsageError as error:
+        print(f"kuka-curriculum train: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("kuka-curriculum train: stopped at once; the run resumes from its last periodic checkpoint",
+              file=sys.stderr)
+        return 130
+
+
+def _train(args: argparse.Namespace) -> int:
+    from learner.checkpoint import latest_checkpoint, load_checkpoint
+
+    checkpoint = None
+    if args.resume:
+        if args.run_dir is None:
+            raise UsageError("--resume needs --run-dir, the run to continue")
+        path = latest_checkpoint(args.run_dir)
+        if path is None:
+            raise UsageError(f"--resume: no checkpoint in {args.run_dir / 'checkpoints'}")
+        checkpoint = load_checkpoint(path)
+    try:
+        config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    run_dir = args.run_dir or Path("runs") / f"{config.teacher}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if checkpoint is None and latest_checkpoint(run_dir) is not None:
+        raise UsageError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
+
+    if args.ray_address is not None:
+        _check_reachable(args.ray_address)
+
+    with contextlib.ExitStack() as stack:
+        teacher_url = _teacher(args.teacher_url, run_dir, stack)
+        name = curriculum_name(run_dir)
+        token = os.environ.get(TOKEN_VARIABLE) or None
+        _register_curriculum(teacher_url, name, config, token)
+        _connect_ray(args.ray_address, config.workers, stack)
+        return _run_training(config, run_dir, teacher_url, name, token, checkpoint)
+
+
+def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str:
+    from learner.teacher_process import local_teacher_service
+
+    if url is None:
+        try:
+            return stack.enter_context(local_teacher_service(run_dir))
+        except RuntimeError as error:
+            raise UsageError(str(error)) from None
+    url = url.rstrip("/")
+    import httpx
+
+    try:
+        httpx.get(f"{url}/healthz", timeout=TEACHER_CONNECT_TIMEOUT_S).raise_for_status()
+    except httpx.HTTPError as error:
+        raise UsageError(f"cannot reach the teacher service at {url} ({error}); start it with "
+                         "`kuka-curriculum serve` or leave out --teacher-url to start one") from None
+    return url
+
+
+def _register_curriculum(url: str, name: str, config: TrainConfig, token: str | None) -> None:
+    from common.task_space import KUKA_TASK_SPACE
+    from common.teacher_client import TeacherClient, TeacherClientError
+
+    with TeacherClient(url, name, token=token) as client:
+        try:
+            client.register(config.teacher, KUKA_TASK_SPACE, seed=config.seed, timeout=TEACHER_CONNECT_TIMEOUT_S)
+        except TeacherClientError as error:
+            raise UsageError(f"cannot register curriculum {name!r} at {url}: {error}") from None
+
+
+def _check_reachable(ray_address: str) -> None:
+    """Fail in seconds, not after Ray's own minute of retries, when nothing listens at the address."""
+    host, _, port = ray_address.removeprefix("ray://").rpartition(":")
+    try:
+        socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
+    except (OSError, ValueError) as error:
+        raise UsageError(f"cannot reach Ray at {ray_address!r} ({error}); expected host:port of a running "
+                         "cluster, or leave out --ray-address to start a local one") from None
+
+
+def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack) -> None:
+    import logging
+
+    import ray
+
+    options: dict[str, Any] = {"log_to_driver": False, "logging_level": logging.WARNING, "namespace": RAY_NAMESPACE}
+    try:
+        if address is None:
+            ray.init(num_cpus=max(workers, os.cpu_count() or 1), include_dashboard=False, **options)
+        else:
+            ray.init(address=address, **options)
+    except (ConnectionError, RuntimeError, ValueError) as error:
+        raise UsageError(f"cannot connect to Ray at {address or 'a new local cluster'}: {error}") from None
+    stack.callback(ray.shutdown)
+
+
+def _run_training(
+    config: TrainConfig, run_dir: Path, teacher_url: str, name: str, token: str | None, checkpoint: Any
+) -> int:
+    from tqdm import tqdm
+
+    from common.teacher_client import TeacherClient
+    from learner.trainer import IterationReport, Trainer
+
+    trainer = Trainer(config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint,
+                      actor_name_prefix=name)
+    print(f"run directory: {run_dir}")
+    print(f"dashboard:     {teacher_url}/curricula/{name}")
+    start = trainer.counters.steps
+    if checkpoint is not None:
+        print(f"resuming from {checkpoint.path} at step {start:_}")
+
+    def on_stop_signal(signum: int, frame: Any) -> None:
+        if trainer.stop_requested:
+            raise KeyboardInterrupt
+        trainer.request_stop()
+        progress.write("stopping after this iteration (Ctrl-C again to stop at once, without a final checkpoint)")
+
+    def on_iteration(report: IterationReport) -> None:
+        progress.update(report.counters.steps - progress.n)
+        progress.set_postfix_str(
+            f"mean reward {report.recent_reward:.2f} | success {report.recent_success_rate:.0%}"
+            f" | {_teacher_summary(status)}",
+            refresh=False,
+        )
+
+    with TeacherClient(teacher_url, name, token=token, request_timeout=STATUS_TIMEOUT_S) as status, tqdm(
+        total=config.total_steps, initial=start, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1
+    ) as progress:
+        previous = {signum: signal.signal(signum, on_stop_signal) for signum in STOP_SIGNALS}
+        try:
+            final = trainer.run(on_iteration)
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+    print(f"final checkpoint: {final}")
+    return 0
+
+
+def _teacher_summary(client: Any) -> str:
+    from common.teacher_client import TeacherClientError
+
+    try:
+        info = client.info(timeout=STATUS_TIMEOUT_S)
+    except TeacherClientError:
+        return "teacher unreachable"
+    counters = info.counters
+    return f"{info.config.teacher}: {counters.results_received:_} results, {counters.fits_completed} fits"

@@ -1,0 +1,123 @@
+"""Every knob of a training run, with its default and a one-line reason.
+
+``PPOConfig`` holds the algorithm's hyperparameters; ``TrainConfig`` holds how the run is laid out
+(workers, budget, teacher, logging). Both are plain frozen dataclasses so a checkpoint can store
+them and ``--resume`` can rebuild the run exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    rollout_length: int = 512
+    """Steps each environment collects per iteration; batch = workers x envs per worker x this."""
+    gamma: float = 0.995
+    """Discount factor; episodes last hundreds of steps and the success bonus comes at the end."""
+    gae_lambda: float = 0.95
+    """GAE bias/variance trade-off (1 = Monte Carlo returns, 0 = one-step TD)."""
+    learning_rate: float = 3e-4
+    """Adam step size at the start of the run."""
+    anneal_lr: bool = True
+    """Decay the learning rate linearly to zero over the step budget."""
+    adam_eps: float = 1e-5
+    """Adam epsilon; larger than torch's default for stability, as in the PPO reference code."""
+    update_epochs: int = 10
+    """Passes over each batch."""
+    minibatch_size: int = 512
+    """Steps per gradient step."""
+    clip_coef: float = 0.2
+    """Policy ratio clipping range (the 'proximal' in PPO)."""
+    clip_value_loss: bool = False
+    """Clip value updates to +-clip_coef around the rollout's estimates (slows critics of unscaled returns)."""
+    value_coef: float = 0.5
+    """Weight of the value loss against the policy loss."""
+    entropy_coef: float = 0.0
+    """Weight of the entropy bonus; the learned log-std already explores."""
+    max_grad_norm: float = 0.5
+    """Global gradient-norm clip."""
+    normalize_advantages: bool = True
+    """Standardise advantages per minibatch."""
+    target_kl: float | None = None
+    """Stop the epoch loop early when the approximate KL exceeds this (None = never)."""
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    """Hidden layer widths of the actor and of the critic (separate tanh MLPs)."""
+    init_log_std: float = -0.5
+    """Initial log standard deviation of the Gaussian policy (actions live in [-1, 1])."""
+    obs_clip: float = 10.0
+    """Normalised observations are clipped to +-this."""
+    torch_threads: int = 1
+    """Threads for the learner's update; small networks gain nothing from more on a busy machine."""
+
+    def __post_init__(self) -> None:
+        _require(self.rollout_length >= 1, "rollout_length must be at least 1")
+        _require(0.0 <= self.gamma <= 1.0, "gamma must be in [0, 1]")
+        _require(0.0 <= self.gae_lambda <= 1.0, "gae_lambda must be in [0, 1]")
+        _require(self.learning_rate > 0, "learning_rate must be positive")
+        _require(self.update_epochs >= 1, "update_epochs must be at least 1")
+        _require(self.minibatch_size >= 1, "minibatch_size must be at least 1")
+        _require(self.clip_coef > 0, "clip_coef must be positive")
+        _require(self.max_grad_norm > 0, "max_grad_norm must be positive")
+        _require(len(self.hidden_sizes) >= 1 and min(self.hidden_sizes) >= 1, "hidden_sizes must be positive widths")
+        _require(self.torch_threads >= 1, "torch_threads must be at least 1")
+
+
+TEACHERS = ("alp-gmm", "manual", "random", "fixed")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    teacher: str = "alp-gmm"
+    """Curriculum teacher: alp-gmm, manual (the book's lesson plan), random (uniform) or fixed (hardest task)."""
+    total_steps: int = 2_000_000
+    """Environment steps to train for (the run stops after the iteration that reaches it)."""
+    workers: int = 2
+    """Rollout actors, one CPU each."""
+    envs_per_worker: int = 4
+    """Environments each actor steps in lockstep; more amortise the batched policy call."""
+    seed: int = 0
+    """Seeds the network, the workers' environments and the teacher."""
+    max_episode_steps: int = 1000
+    """Episode step limit (truncation)."""
+    checkpoint_every: int = 20
+    """Iterations between checkpoints (one is always written at the end)."""
+    eval_every: int = 25
+    """Iterations between evaluations on the hardest task (0 = never); 25 keeps their cost near 5%."""
+    eval_episodes: int = 10
+    """Evaluation episodes, one per fixed seed, shared out over the workers."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """Algorithm hyperparameters."""
+
+    def __post_init__(self) -> None:
+        _require(self.teacher in TEACHERS, f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
+        _require(self.total_steps >= 1, "total_steps must be at least 1")
+        _require(self.workers >= 1, "workers must be at least 1")
+        _require(self.envs_per_worker >= 1, "envs_per_worker must be at least 1")
+        _require(self.max_episode_steps >= 1, "max_episode_steps must be at least 1")
+        _require(self.checkpoint_every >= 1, "checkpoint_every must be at least 1")
+        _require(self.eval_every >= 0, "eval_every must be 0 (never) or more")
+        _require(self.eval_episodes >= 1, "eval_episodes must be at least 1")
+
+    @property
+    def batch_size(self) -> int:
+        return self.workers * self.envs_per_worker * self.ppo.rollout_length
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in fields(cls)}
+        values = {key: value for key, value in data.items() if key in known and key != "ppo"}
+        ppo = dict(data.get("ppo", {}))
+        if "hidden_sizes" in ppo:
+            ppo["hidden_sizes"] = tuple(ppo["hidden_sizes"])
+        return cls(**values, ppo=PPOConfig(**ppo))
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)

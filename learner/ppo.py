@@ -1,0 +1,155 @@
+"""Proximal Policy Optimisation: GAE advantages and the clipped-surrogate update.
+
+Pure torch and numpy: batches in, metrics out. The learner owns the network, the optimiser and the
+observation normaliser; ``snapshot()`` is what the workers act with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from common.normalizer import NormalizerState, RunningNormalizer
+from common.policy import ActorCritic, PolicySnapshot, PolicySpec
+from common.trajectory import TrajectoryBatch
+from learner.config import PPOConfig
+
+
+def compute_advantages(batch: TrajectoryBatch, gamma: float, gae_lambda: float) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised advantage estimates and value targets, both (steps, envs).
+
+    A terminated episode bootstraps from zero; a truncated one from the value of its last
+    observation (it could have gone on); the chain of lambda-returns never crosses an episode end.
+    """
+    advantages = np.zeros_like(batch.rewards, dtype=np.float64)
+    running = np.zeros(batch.rewards.shape[1], dtype=np.float64)
+    next_values = batch.last_values.astype(np.float64)
+    for step in reversed(range(batch.rewards.shape[0])):
+        ended = batch.terminated[step] | batch.truncated[step]
+        bootstrap = np.where(batch.truncated[step], batch.final_values[step], next_values)
+        bootstrap = np.where(batch.terminated[step], 0.0, bootstrap)
+        delta = batch.rewards[step] + gamma * bootstrap - batch.values[step]
+        running = delta + gamma * gae_lambda * ~ended * running
+        advantages[step] = running
+        next_values = batch.values[step]
+    return advantages, advantages + batch.values
+
+
+class PPOLearner:
+    """The network, its optimiser and the observation statistics; ``version`` counts updates."""
+
+    def __init__(self, spec: PolicySpec, config: PPOConfig, seed: int) -> None:
+        self.config = config
+        with torch.random.fork_rng():
+            torch.manual_seed(seed)
+            self.network = ActorCritic(spec)
+        # The fused kernel does Adam's per-parameter updates in one call: a third off each step on CPU.
+        self.optimizer = torch.optim.Adam(
+            self.network.parameters(), lr=config.learning_rate, eps=config.adam_eps, fused=True
+        )
+        self.normalizer = RunningNormalizer(spec.obs_dim, clip=config.obs_clip)
+        self.shuffle = torch.Generator().manual_seed(seed)
+        self.version = 0
+
+    def snapshot(self) -> PolicySnapshot:
+        return PolicySnapshot.capture(self.network, self.normalizer, self.version)
+
+    def update(self, batches: Sequence[TrajectoryBatch], progress: float = 0.0) -> dict[str, float]:
+        """One PPO update on batches collected with the current snapshot.
+
+        ``progress`` in [0, 1] is the share of the step budget already spent (learning-rate annealing).
+        """
+        stale = sorted({batch.policy_version for batch in batches} - {self.version})
+        if stale:
+            raise ValueError(f"PPO is on-policy: batches of policy version(s) {stale}, learner at {self.version}")
+        cfg = self.config
+        learning_rate = cfg.learning_rate * (1.0 - min(max(progress, 0.0), 1.0)) if cfg.anneal_lr else cfg.learning_rate
+        for group in self.optimizer.param_groups:
+            group["lr"] = learning_rate
+
+        gae = [compute_advantages(batch, cfg.gamma, cfg.gae_lambda) for batch in batches]
+        raw_observations = np.concatenate([b.observations.reshape(-1, b.observations.shape[-1]) for b in batches])
+        observations = torch.from_numpy(self.normalizer.normalize(raw_observations))
+        actions = torch.from_numpy(np.concatenate([b.actions.reshape(-1, b.actions.shape[-1]) for b in batches]))
+        old_log_probs = _flat(b.log_probs for b in batches)
+        old_values = _flat(b.values for b in batches)
+        advantages = _flat(adv for adv, _ in gae)
+        returns = _flat(ret for _, ret in gae)
+
+        size = observations.shape[0]
+        stats: dict[str, list[torch.Tensor]] = {
+            name: [] for name in ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
+        }
+        for _ in range(cfg.update_epochs):
+            order = torch.randperm(size, generator=self.shuffle)
+            for start in range(0, size, cfg.minibatch_size):
+                idx = order[start : start + cfg.minibatch_size]
+                new_log_probs, entropy, new_values = self.network.evaluate(observations[idx], actions[idx])
+                log_ratio = new_log_probs - old_log_probs[idx]
+                ratio = log_ratio.exp()
+
+                adv = advantages[idx]
+                if cfg.normalize_advantages and len(idx) > 1:
+                    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
+
+                value_error = (new_values - returns[idx]) ** 2
+                if cfg.clip_value_loss:
+                    clipped = old_values[idx] + (new_values - old_values[idx]).clamp(-cfg.clip_coef, cfg.clip_coef)
+                    value_error = torch.max(value_error, (clipped - returns[idx]) ** 2)
+                value_loss = 0.5 * value_error.mean()
+
+                loss = policy_loss - cfg.entropy_coef * entropy.mean() + cfg.value_coef * value_loss
+                self.optimizer.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(self.network.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+
+                with torch.no_grad():
+                    approx_kl = ((ratio - 1) - log_ratio).mean()
+                    stats["clip_fraction"].append(((ratio - 1).abs() > cfg.clip_coef).float().mean())
+                stats["policy_loss"].append(policy_loss.detach())
+                stats["value_loss"].append(value_loss.detach())
+                stats["entropy"].append(entropy.detach().mean())
+                stats["approx_kl"].append(approx_kl)
+            if cfg.target_kl is not None and approx_kl.item() > cfg.target_kl:
+                break
+
+        self.normalizer.update(raw_observations)
+        self.version += 1
+        metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
+        metrics["learning_rate"] = learning_rate
+        metrics["explained_variance"] = _explained_variance(old_values.numpy(), returns.numpy())
+        metrics["action_std"] = float(self.network.actor_log_std.exp().mean().item())
+        return metrics
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "network": self.network.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "normalizer": {name: torch.as_tensor(value) for name, value in vars(self.normalizer.state()).items()},
+            "shuffle_rng": self.shuffle.get_state(),
+            "version": self.version,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.network.load_state_dict(state["network"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        saved = state["normalizer"]
+        self.normalizer.load_state(NormalizerState(**{name: np.asarray(value) for name, value in saved.items()}))
+        self.shuffle.set_state(state["shuffle_rng"])
+        self.version = int(state["version"])
+
+
+def _flat(arrays: Any) -> torch.Tensor:
+    return torch.from_numpy(np.concatenate([np.asarray(a, dtype=np.float32).reshape(-1) for a in arrays]))
+
+
+def _explained_variance(predicted: np.ndarray, target: np.ndarray) -> float:
+    """1 = the critic predicts the returns perfectly, 0 = no better than their mean."""
+    variance = float(np.var(target))
+    return float("nan") if variance == 0 else 1.0 - float(np.var(target - predicted)) / variance

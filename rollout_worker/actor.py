@@ -1,0 +1,89 @@
+"""The rollout actor: KUKA environments, a teacher client and the sampling loop in one Ray process.
+
+Every episode's task comes from the teacher service and its result goes straight back there; the
+learner only ever receives fixed-size batches. Weights arrive as a ``PolicySnapshot``; passing a
+``ray.put`` reference lets Ray fetch it from the object store once per worker.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import ray
+import torch
+
+from common.kuka_env import KukaGraspEnv
+from common.policy import InferencePolicy, PolicySnapshot
+from common.task_space import Task
+from common.teacher_client import Assignment, TeacherClient
+from common.trajectory import EpisodeStats, TrajectoryBatch
+from rollout_worker.sampler import Sampler, run_episodes
+
+
+TASK_TIMEOUT_S = 2.0
+"""How long a worker waits for the teacher before playing an offline episode: short, because
+every environment whose episode ends during an outage pays it."""
+
+
+@dataclass(frozen=True)
+class WorkerSettings:
+    """What every worker of a run shares."""
+
+    teacher_url: str
+    curriculum: str
+    num_envs: int
+    rollout_length: int
+    max_episode_steps: int
+    teacher_token: str | None = None
+
+
+class _TeacherTasks:
+    """Adapts the teacher client to the sampler's ``TaskSource``."""
+
+    def __init__(self, client: TeacherClient) -> None:
+        self.client = client
+
+    def next_task(self) -> tuple[str | None, Task]:
+        assignment = self.client.next_task()
+        return assignment.task_id, assignment.params
+
+    def report(self, episode: EpisodeStats) -> None:
+        self.client.report(Assignment(episode.task_id, episode.task), episode.reward,
+                           success=episode.success, length=episode.length)
+
+
+@ray.remote(num_cpus=1)
+class RolloutWorker:
+    """One CPU's worth of environments; every call runs on the weights it is handed."""
+
+    def __init__(self, settings: WorkerSettings, seed: int) -> None:
+        torch.set_num_threads(1)
+        self.settings = settings
+        self.seed = seed
+        self.client = TeacherClient(settings.teacher_url, settings.curriculum, token=settings.teacher_token,
+                                    prefetch=2 * settings.num_envs, task_timeout=TASK_TIMEOUT_S)
+        envs = [KukaGraspEnv(max_steps=settings.max_episode_steps) for _ in range(settings.num_envs)]
+        self.sampler = Sampler(envs, _TeacherTasks(self.client), seed)
+        self.evaluation_env: KukaGraspEnv | None = None
+        self.policy: InferencePolicy | None = None
+
+    def _load(self, snapshot: PolicySnapshot) -> InferencePolicy:
+        if self.policy is None:
+            self.policy = InferencePolicy(snapshot, seed=self.seed)
+        elif self.policy.version != snapshot.version:
+            self.policy.load(snapshot)
+        return self.policy
+
+    def sample(self, snapshot: PolicySnapshot) -> TrajectoryBatch:
+        return self.sampler.sample(self._load(snapshot), self.settings.rollout_length)
+
+    def evaluate(self, snapshot: PolicySnapshot, task: Task, seeds: Sequence[int]) -> list[EpisodeStats]:
+        """Deterministic episodes on environments of their own, so training episodes are not disturbed."""
+        if self.evaluation_env is None:
+            self.evaluation_env = KukaGraspEnv(max_steps=self.settings.max_episode_steps)
+        return run_episodes(self.evaluation_env, self._load(snapshot), task, seeds)
+
+    def close(self) -> None:
+        """Deliver every buffered episode result to the teacher."""
+        self.client.close()

@@ -1,0 +1,58 @@
+import numpy as np
+import pytest
+import torch
+
+from common.normalizer import RunningNormalizer
+from common.policy import ActorCritic, InferencePolicy, PolicySnapshot, PolicySpec
+
+
+@pytest.fixture()
+def trained_looking():
+    """A network with non-trivial weights and a normaliser that has seen offset, scaled data."""
+    torch.manual_seed(0)
+    network = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 6), init_log_std=-0.3))
+    with torch.no_grad():
+        for parameter in network.parameters():
+            parameter.add_(0.3 * torch.randn_like(parameter))
+    normalizer = RunningNormalizer(5)
+    normalizer.update(np.random.default_rng(0).normal(50.0, 4.0, size=(200, 5)))
+    return network, normalizer
+
+
+def test_inference_matches_the_training_network_on_normalised_observations(trained_looking):
+    network, normalizer = trained_looking
+    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=7), seed=3)
+    observations = np.random.default_rng(1).normal(50.0, 4.0, size=(6, 5)).astype(np.float32)
+
+    actions, log_probs, values = policy.act(observations)
+
+    inputs = torch.from_numpy(normalizer.normalize(observations))
+    expected_log_probs, _, expected_values = network.evaluate(inputs, torch.from_numpy(actions))
+    assert log_probs == pytest.approx(expected_log_probs.detach().numpy(), abs=1e-4)
+    assert values == pytest.approx(expected_values.detach().numpy(), abs=1e-5)
+    assert policy.value(observations) == pytest.approx(values, abs=1e-6)
+    deterministic, _, _ = policy.act(observations, deterministic=True)
+    assert deterministic == pytest.approx(network.actor_mean(inputs).detach().numpy(), abs=1e-5)
+    assert policy.version == 7
+
+
+def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(trained_looking):
+    network, normalizer = trained_looking
+    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    observations = np.zeros((3, 5), dtype=np.float32)
+    first, again = InferencePolicy(snapshot, seed=11), InferencePolicy(snapshot, seed=11)
+    assert np.array_equal(first.act(observations)[0], again.act(observations)[0])
+
+    with torch.no_grad():
+        network.actor_mean[0].bias.add_(1.0)
+    again.load(PolicySnapshot.capture(network, normalizer, version=1))
+    assert not np.allclose(first.act(observations, deterministic=True)[0], again.act(observations, deterministic=True)[0])
+    assert again.version == 1
+
+
+def test_a_snapshot_of_another_shape_is_refused(trained_looking):
+    network, normalizer = trained_looking
+    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0))
+    other = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,)))
+    with pytest.raises(ValueError, match="snapshot is for"):
+        policy.load(PolicySnapshot.capture(other, normalizer, version=1))

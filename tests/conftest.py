@@ -1,0 +1,24 @@
+"""Fixtures shared across packages: one local Ray cluster for the whole test session."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+RAY_TEST_CPUS = 4
+"""Logical CPUs: two rollout actors plus room for a replacement while a killed one is reaped."""
+
+
+@pytest.fixture(scope="session")
+def ray_cluster() -> Iterator[str]:
+    """Start a local Ray once per session; yields its address so subprocesses can join it."""
+    import ray
+
+    context = ray.init(
+        num_cpus=RAY_TEST_CPUS, include_dashboard=False, log_to_driver=False, namespace="kuka-curriculum-tests"
+    )
+    try:
+        yield context.address_info["address"]
+    finally:
+        ray.shutdown()

@@ -1,0 +1,41 @@
+import pytest
+
+from learner.config import PPOConfig, TrainConfig
+
+
+def test_config_survives_a_round_trip_through_a_plain_dict():
+    config = TrainConfig(teacher="manual", workers=3, ppo=PPOConfig(hidden_sizes=(32, 16), target_kl=0.02))
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    assert config.batch_size == 3 * config.envs_per_worker * config.ppo.rollout_length
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: TrainConfig(teacher="curious"), "teacher must be one of"),
+        (lambda: TrainConfig(workers=0), "workers"),
+        (lambda: TrainConfig(total_steps=0), "total_steps"),
+        (lambda: PPOConfig(gamma=1.5), "gamma"),
+        (lambda: PPOConfig(minibatch_size=0), "minibatch_size"),
+        (lambda: PPOConfig(hidden_sizes=()), "hidden_sizes"),
+    ],
+)
+def test_bad_settings_are_refused_with_the_setting_named(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_every_setting_has_a_one_line_doc():
+    import ast
+    import inspect
+
+    from learner import config as module
+
+    tree = ast.parse(inspect.getsource(module))
+    for node in (n for n in tree.body if isinstance(n, ast.ClassDef) and n.name in ("PPOConfig", "TrainConfig")):
+        body = node.body
+        for index, statement in enumerate(body):
+            if isinstance(statement, ast.AnnAssign):
+                following = body[index + 1] if index + 1 < len(body) else None
+                assert isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant), statement.target.id
+                assert "\n" not in following.value.value.strip(), statement.target.id

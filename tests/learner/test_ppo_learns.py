@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+import torch
+from reach_env import ReachTarget, RecordingTasks
+
+from common.policy import InferencePolicy, PolicySpec
+from learner.config import PPOConfig
+from learner.ppo import PPOLearner
+from rollout_worker.sampler import Sampler, run_episodes
+
+EVAL_SEEDS = range(1000, 1040)
+
+
+def evaluate(learner: PPOLearner) -> tuple[float, float]:
+    episodes = run_episodes(ReachTarget(), InferencePolicy(learner.snapshot()), {}, EVAL_SEEDS)
+    return float(np.mean([e.reward for e in episodes])), float(np.mean([e.success for e in episodes]))
+
+
+@pytest.fixture()
+def one_torch_thread():
+    """As the trainer runs: on a busy machine, more threads wait on each other far longer than they compute."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_torch_thread):
+    config = PPOConfig(rollout_length=128, gamma=0.99, minibatch_size=128, update_epochs=10, learning_rate=1e-3)
+    learner = PPOLearner(PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(32, 32), init_log_std=0.0), config, seed=1)
+    tasks = RecordingTasks()
+    sampler = Sampler([ReachTarget() for _ in range(4)], tasks, seed=1)
+    untrained_return, untrained_success = evaluate(learner)
+
+    iterations = 25
+    for iteration in range(iterations):
+        batch = sampler.sample(InferencePolicy(learner.snapshot(), seed=iteration), config.rollout_length)
+        learner.update([batch], progress=iteration / iterations)
+
+    trained_return, trained_success = evaluate(learner)
+    assert trained_success >= 0.9, (untrained_success, trained_success)
+    assert trained_return > untrained_return + 2.0, (untrained_return, trained_return)
+    # The normaliser converged on the badly scaled observations it was fed.
+    assert np.allclose(learner.normalizer.mean, [300.0, -7.0], atol=10.0)
+    assert tasks.reported and len(tasks.reported) <= tasks.handed_out
+
+
+def test_a_batch_from_an_earlier_policy_is_refused(one_torch_thread):
+    learner = PPOLearner(PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(8,)), PPOConfig(minibatch_size=32), seed=0)
+    sampler = Sampler([ReachTarget()], RecordingTasks(), seed=0)
+    batch = sampler.sample(InferencePolicy(learner.snapshot()), 32)
+    learner.update([batch])
+    with pytest.raises(ValueError, match="on-policy"):
+        learner.update([batch])

@@ -1,0 +1,50 @@
+"""``kuka-curriculum train`` refuses bad input and unreachable services at once, with a clear message."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from common.cli import main
+from common.policy import PolicySpec
+from learner.checkpoint import Counters, save_checkpoint
+from learner.config import TrainConfig
+from learner.ppo import PPOLearner
+from learner.teacher_process import free_port
+
+
+def test_a_bad_flag_is_refused_by_name(capsys):
+    with pytest.raises(SystemExit) as stopped:
+        main(["train", "--envs-per-worker", "0"])
+    assert stopped.value.code == 2
+    assert "--envs-per-worker: must be at least 1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("flag", "message"),
+    [
+        ("--teacher-url", "cannot reach the teacher service at http://127.0.0.1:{port}"),
+        ("--ray-address", "cannot reach Ray at '127.0.0.1:{port}'"),
+    ],
+)
+def test_an_unreachable_service_fails_fast(tmp_path, capsys, flag, message):
+    port = free_port()
+    address = f"http://127.0.0.1:{port}" if flag == "--teacher-url" else f"127.0.0.1:{port}"
+    started = time.monotonic()
+    assert main(["train", flag, address, "--run-dir", str(tmp_path / "run")]) == 2
+    assert time.monotonic() - started < 15
+    assert message.format(port=port) in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_resume_needs_a_checkpoint_and_a_finished_run_is_not_overwritten(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    assert main(["train", "--resume", "--run-dir", str(run_dir)]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+
+    config = TrainConfig()
+    learner = PPOLearner(PolicySpec(obs_dim=9, action_dim=3), config.ppo, seed=0)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
+    assert main(["train", "--run-dir", str(run_dir)]) == 2
+    assert "pass --resume" in capsys.readouterr().err
