@@ -1,0 +1,304 @@
+"""``kuka-curriculum evaluate``: how good is a checkpoint, with error bars.
+
+The deterministic policy (the Gaussian's mean) plays a fixed number of episodes on one task.
+Episode ``i`` is seeded ``seed + i`` and the results are put back in episode order, so the figures
+depend on the checkpoint, the task and the seed only, never on how many processes shared the work.
+Processes are plain CPU workers (no Ray, no teacher): evaluation must work on a laptop with
+nothing else running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pickle
+import sys
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from common.kuka_env import KukaGraspEnv
+from common.policy import InferencePolicy, PolicySnapshot, PolicySpec
+from common.task_space import KUKA_TASK_SPACE, Task
+from common.trajectory import EpisodeStats
+from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
+from learner.ppo import PPOLearner
+from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
+from rollout_worker.sampler import run_episodes
+
+TASK_HELP = ("'hardest' (the book's evaluation setting), 'easiest', or name=value overrides on the hardest task, "
+             "e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to override the easiest one)")
+
+
+class UsageError(Exception):
+    """Bad input: reported in one line, exit code 2."""
+
+
+def parse_task(text: str) -> Task:
+    """A task from the command line: an anchor name, optionally followed by ``name=value`` overrides."""
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise ValueError(f"empty task; expected {TASK_HELP}")
+    base = KUKA_TASK_SPACE.hardest()
+    if "=" not in items[0]:
+        anchor = items.pop(0)
+        if anchor not in ("hardest", "easiest"):
+            raise ValueError(f"unknown task {anchor!r}; expected {TASK_HELP}")
+        base = KUKA_TASK_SPACE.hardest() if anchor == "hardest" else KUKA_TASK_SPACE.easiest()
+    overrides: dict[str, float] = {}
+    for item in items:
+        name, separator, value = (part.strip() for part in item.partition("="))
+        if not separator or not name:
+            names = ", ".join(KUKA_TASK_SPACE.names)
+            raise ValueError(f"bad task item {item!r}: expected name=value; names are {names}")
+        if name in overrides:
+            raise ValueError(f"task parameter {name!r} is given twice")
+        try:
+            overrides[name] = float(value)
+        except ValueError:
+            raise ValueError(f"task parameter {name!r} must be a number, got {value!r}") from None
+    return KUKA_TASK_SPACE.validate({**base, **overrides})
+
+
+def task_argument(text: str) -> Task:
+    """``parse_task`` for argparse, so a bad task is reported as a usage error."""
+    try:
+        return parse_task(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def describe_task(task: Task) -> str:
+    """'hardest task', or the nearer anchor and what differs from it: 'easiest task with jp2=1'."""
+    anchors = {name: getattr(KUKA_TASK_SPACE, name)() for name in ("hardest", "easiest")}
+    changes = {name: [f"{key}={value:g}" for key, value in task.items() if value != anchor[key]]
+               for name, anchor in anchors.items()}
+    nearest = min(changes, key=lambda name: len(changes[name]))
+    return f"{nearest} task" + (f" with {', '.join(changes[nearest])}" if changes[nearest] else "")
+
+
+def read_checkpoint(path: Path) -> Checkpoint:
+    """A checkpoint file as given, or the latest checkpoint of a run directory."""
+    path = Path(path)
+    if path.is_dir():
+        latest = latest_checkpoint(path)
+        if latest is None:
+            raise UsageError(f"{path} is a directory without checkpoints (expected a run directory or a .pt file)")
+        path = latest
+    elif not path.is_file():
+        raise UsageError(f"no checkpoint at {path}")
+    try:
+        return load_checkpoint(path)
+    except (RuntimeError, pickle.UnpicklingError, KeyError, TypeError, ValueError) as error:
+        raise UsageError(f"{path} is not a checkpoint this version can read ({error})") from None
+
+
+def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
+    """The policy a checkpoint holds, in the form the rollout workers act with."""
+    probe = KukaGraspEnv()
+    spec = PolicySpec(
+        obs_dim=probe.observation_space.shape[0],
+        action_dim=probe.action_space.shape[0],
+        hidden_sizes=checkpoint.config.ppo.hidden_sizes,
+        init_log_std=checkpoint.config.ppo.init_log_std,
+    )
+    probe.close()
+    learner = PPOLearner(spec, checkpoint.config.ppo, checkpoint.config.seed)
+    learner.load_state_dict(checkpoint.learner)
+    return learner.snapshot()
+
+
+@dataclass(frozen=True)
+class EvaluationResult:
+    task: Task
+    seed: int
+    episodes: tuple[EpisodeStats, ...]
+
+    @property
+    def returns(self) -> Interval:
+        return mean_interval([episode.reward for episode in self.episodes])
+
+    @property
+    def success_rate(self) -> Interval:
+        return wilson_interval(sum(episode.success for episode in self.episodes), len(self.episodes))
+
+    @property
+    def mean_length(self) -> float:
+        return float(np.mean([episode.length for episode in self.episodes]))
+
+    def summary(self) -> str:
+        returns, success = self.returns, self.success_rate
+        spread = "n/a" if math.isnan(returns.half_width) else f"{returns.half_width:.2f}"
+        return (
+            f"{describe_task(self.task)}, {len(self.episodes)} episodes: "
+            f"return {returns.estimate:.2f} ± {spread} ({CONFIDENCE:.0%} CI), "
+            f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson {CONFIDENCE:.0%}), "
+            f"mean length {self.mean_length:.0f}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "task": self.task,
+            "seed": self.seed,
+            "episodes": len(self.episodes),
+            "confidence": CONFIDENCE,
+            "return": self.returns.to_dict(),
+            "success_rate": self.success_rate.to_dict(),
+            "mean_length": self.mean_length,
+            "per_episode": {
+                "return": [episode.reward for episode in self.episodes],
+                "success": [episode.success for episode in self.episodes],
+                "length": [episode.length for episode in self.episodes],
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EvaluationResult:
+        task = KUKA_TASK_SPACE.validate(data["task"])
+        per_episode = data["per_episode"]
+        episodes = tuple(
+            EpisodeStats(task=task, reward=float(reward), success=bool(success), length=int(length))
+            for reward, success, length in zip(per_episode["return"], per_episode["success"], per_episode["length"])
+        )
+        return cls(task=task, seed=int(data["seed"]), episodes=episodes)
+
+
+def available_cpus() -> int:
+    """CPUs this process may run on (respects taskset and container limits where the OS reports them)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+_worker: tuple[KukaGraspEnv, InferencePolicy, Task] | None = None
+"""Each pool process's environment, policy and task, built once by ``_start_worker``."""
+
+
+def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int) -> None:
+    global _worker
+    torch.set_num_threads(1)
+    _worker = (KukaGraspEnv(max_steps=max_episode_steps), InferencePolicy(snapshot), task)
+
+
+def _play_episode(seed: int) -> EpisodeStats:
+    env, policy, task = _worker
+    return run_episodes(env, policy, task, [seed])[0]
+
+
+def evaluate_policy(
+    snapshot: PolicySnapshot,
+    task: Task,
+    episodes: int,
+    seed: int = 0,
+    processes: int | None = None,
+    max_episode_steps: int = 1000,
+    progress: bool = True,
+) -> EvaluationResult:
+    """Play ``episodes`` deterministic episodes, seeded ``seed``, ``seed + 1``, ...
+
+    ``processes=None`` uses one process per available CPU (at most one per episode); with one,
+    the episodes run in this process.
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    if processes is not None and processes < 1:
+        raise ValueError(f"processes must be at least 1, got {processes}")
+    task = KUKA_TASK_SPACE.validate(task)
+    processes = min(processes or available_cpus(), episodes)
+    seeds = [seed + index for index in range(episodes)]
+    results: list[EpisodeStats | None] = [None] * episodes
+    with tqdm(total=episodes, desc="evaluating", unit="episode", disable=not progress, dynamic_ncols=True) as bar:
+        if processes == 1:
+            env, policy = KukaGraspEnv(max_steps=max_episode_steps), InferencePolicy(snapshot)
+            for index, episode_seed in enumerate(seeds):
+                results[index] = run_episodes(env, policy, task, [episode_seed])[0]
+                bar.update()
+            env.close()
+        else:
+            # spawn, not fork: the parent may hold Ray's and torch's threads, which fork does not copy safely.
+            with ProcessPoolExecutor(processes, mp_context=get_context("spawn"), initializer=_start_worker,
+                                     initargs=(snapshot, task, max_episode_steps)) as pool:
+                futures = {pool.submit(_play_episode, episode_seed): index for index, episode_seed in enumerate(seeds)}
+                for future in as_completed(futures):
+                    results[futures[future]] = future.result()
+                    bar.update()
+    return EvaluationResult(task=task, seed=seed, episodes=tuple(results))
+
+
+def evaluate_checkpoint(
+    checkpoint: Checkpoint,
+    task: Task,
+    episodes: int,
+    seed: int = 0,
+    processes: int | None = None,
+    max_episode_steps: int | None = None,
+    progress: bool = True,
+) -> EvaluationResult:
+    """``evaluate_policy`` on a checkpoint, with its run's episode limit unless one is given."""
+    return evaluate_policy(
+        policy_snapshot(checkpoint), task, episodes, seed, processes,
+        max_episode_steps or checkpoint.config.max_episode_steps, progress,
+    )
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: a whole number (underscores allowed, as in 2_000_000) of at least ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text.replace("_", ""))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+positive_int = int_at_least(1)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("checkpoint", type=Path, metavar="CHECKPOINT",
+                        help="a checkpoint file, or a run directory (its latest checkpoint)")
+    parser.add_argument("--episodes", type=positive_int, default=100, help="episodes to play (default 100)")
+    parser.add_argument("--task", type=task_argument, default=KUKA_TASK_SPACE.hardest(), help=TASK_HELP)
+    parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i (default 0)")
+    parser.add_argument("--processes", type=positive_int,
+                        help=f"worker processes (default: one per CPU, here {available_cpus()})")
+    parser.add_argument("--max-episode-steps", type=positive_int,
+                        help="episode step limit (default: the one the checkpoint was trained with)")
+    parser.add_argument("--json", type=Path, metavar="PATH", help="also write the results, per episode included, here")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        checkpoint = read_checkpoint(args.checkpoint)
+    except UsageError as error:
+        print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
+        return 2
+    result = evaluate_checkpoint(checkpoint, args.task, args.episodes, args.seed, args.processes,
+                                 args.max_episode_steps)
+    print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
+    print(result.summary())
+    if args.json is not None:
+        write_json(args.json, {"checkpoint": str(checkpoint.path), "steps": checkpoint.counters.steps,
+                               "teacher": checkpoint.config.teacher, **result.to_dict()})
+    return 0
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write through a temporary file, so an interrupted write never leaves half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    os.replace(partial, path)

@@ -1,0 +1,77 @@
+"""``kuka-curriculum bakeoff`` on a tiny budget: real training children, real Ray, a real teacher service."""
+
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import pytest
+
+from common.cli import main
+from learner.bakeoff import BOOK_RETURNS, learning_curve, plan_runs
+from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.stats import mean_interval
+
+BATCH = 1 * 2 * 128
+TINY = [
+    "--seeds", "1", "--workers", "1", "--envs-per-worker", "2", "--rollout-length", "128",
+    "--max-episode-steps", "60", "--checkpoint-every", "1", "--curve-every", "1", "--curve-episodes", "2",
+    "--eval-episodes", "3", "--eval-processes", "1",
+]
+
+
+def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cluster, capsys):
+    out = tmp_path / "bakeoff"
+
+    def bakeoff(*flags: str) -> int:
+        return main(["bakeoff", "--out", str(out), "--ray-address", ray_cluster, *TINY, *flags])
+
+    # A shorter first session leaves `fixed` with a checkpoint below the final budget, as an interruption would.
+    assert bakeoff("--teachers", "fixed", "--total-steps", str(BATCH)) == 0
+    fixed, random = plan_runs(out, ["fixed", "random"], seeds=1)
+    assert load_checkpoint(latest_checkpoint(fixed.directory)).counters.steps == BATCH
+    capsys.readouterr()
+
+    assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
+    printed = capsys.readouterr().out
+    assert f"fixed-seed0: resuming at {BATCH:_}" in printed and "random-seed0: training" in printed
+    assert f"at step {BATCH:_}" in (fixed.directory / "train.log").read_text()
+    for run in (fixed, random):
+        checkpoint = load_checkpoint(latest_checkpoint(run.directory))
+        assert checkpoint.counters.steps == 2 * BATCH and checkpoint.config.teacher == run.teacher
+        assert checkpoint.config.workers == 1 and checkpoint.config.max_episode_steps == 60
+        assert sorted(learning_curve(run)) == [BATCH, 2 * BATCH]
+
+    results = json.loads((out / "results.json").read_text())
+    assert [entry["teacher"] for entry in results["teachers"]] == ["fixed", "random"]
+    table = (out / "results.md").read_text()
+    for entry, run in zip(results["teachers"], (fixed, random)):
+        evaluation = json.loads((run.directory / "evaluation.json").read_text())
+        returns = mean_interval(evaluation["per_episode"]["return"])
+        assert evaluation["checkpoint"] == latest_checkpoint(run.directory).name, "the final policy is evaluated"
+        assert evaluation["episodes"] == 3 and evaluation["task"] == results["evaluation"]["task"]
+        assert entry["seeds"] == 1 and entry["return"] == returns.to_dict()
+        assert entry["book_return"] == BOOK_RETURNS.get(run.teacher)
+        assert f"(`{run.teacher}`) | {returns.estimate:.2f} ± {returns.half_width:.2f} |" in table
+    assert f"| {BOOK_RETURNS['fixed']:.2f} |" in table
+    assert iio.imread(out / "learning_curves.png").ndim == 3
+
+    # Run again: every run is finished and evaluated, so nothing is trained or evaluated anew.
+    untouched = {path: path.stat().st_mtime_ns for path in out.glob("runs/*/*") if path.is_file()}
+    untouched |= {path: path.stat().st_mtime_ns for path in out.glob("runs/*/checkpoints/*")}
+    assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
+    printed = capsys.readouterr().out
+    assert printed.count(f"finished at {2 * BATCH:_} steps, skipped") == 2
+    assert {path: path.stat().st_mtime_ns for path in untouched} == untouched
+
+    # Other hyperparameters in the same directory would make an unfair comparison.
+    assert bakeoff("--teachers", "fixed", "--total-steps", str(2 * BATCH), "--rollout-length", "64") == 2
+    assert "rollout_length: 128 before, 64 now" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flags", "message"), [(["--teachers", "curious"], "invalid choice"),
+                                                (["--seeds", "0"], "at least 1")])
+def test_bad_bakeoff_flags_are_refused(tmp_path, capsys, flags, message):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["bakeoff", "--out", str(tmp_path), *flags])
+    assert exit_info.value.code == 2 and message in capsys.readouterr().err

@@ -1,0 +1,98 @@
+"""``kuka-curriculum evaluate`` on a real checkpoint: figures, intervals, seeds, processes, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from tiny_checkpoint import TINY_EPISODE_STEPS, save_untrained_checkpoint
+
+from common.cli import main
+from common.kuka_env import KukaGraspEnv
+from common.policy import InferencePolicy
+from common.task_space import KUKA_TASK_SPACE
+from learner.checkpoint import load_checkpoint
+from learner.evaluate import describe_task, evaluate_policy, parse_task, policy_snapshot
+from learner.stats import mean_interval, wilson_interval
+from rollout_worker.sampler import run_episodes
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    return save_untrained_checkpoint(tmp_path_factory.mktemp("run"))
+
+
+def test_evaluate_prints_and_writes_intervals_of_the_episodes_it_played(checkpoint, tmp_path, capsys):
+    out = tmp_path / "eval" / "result.json"
+    code = main(["evaluate", str(checkpoint), "--episodes", "5", "--seed", "7", "--processes", "1", "--json", str(out)])
+
+    assert code == 0
+    written = json.loads(out.read_text())
+    per_episode = written["per_episode"]
+    assert written["checkpoint"] == str(checkpoint) and written["steps"] == 512 and written["episodes"] == 5
+    assert written["task"] == KUKA_TASK_SPACE.hardest()
+    # The checkpoint's own episode limit applies unless another is given.
+    assert all(1 <= length <= TINY_EPISODE_STEPS for length in per_episode["length"])
+
+    returns = mean_interval(per_episode["return"])
+    success = wilson_interval(sum(per_episode["success"]), 5)
+    assert written["return"] == returns.to_dict() and written["success_rate"] == success.to_dict()
+    printed = capsys.readouterr().out
+    assert (f"hardest task, 5 episodes: return {returns.estimate:.2f} ± {returns.half_width:.2f} (95% CI), "
+            f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson 95%), "
+            f"mean length {written['mean_length']:.0f}") in printed
+
+    # Episode i is the deterministic policy's episode with seed 7 + i.
+    env = KukaGraspEnv(max_steps=TINY_EPISODE_STEPS)
+    expected = run_episodes(env, InferencePolicy(policy_snapshot(load_checkpoint(checkpoint))),
+                            KUKA_TASK_SPACE.hardest(), range(7, 12))
+    env.close()
+    assert per_episode["return"] == [episode.reward for episode in expected]
+
+
+def test_results_do_not_depend_on_how_many_processes_share_the_episodes(checkpoint):
+    snapshot = policy_snapshot(load_checkpoint(checkpoint))
+    task = parse_task("rnd_obj_ang=0.3")
+    alone = evaluate_policy(snapshot, task, episodes=4, seed=3, processes=1, max_episode_steps=30, progress=False)
+    shared = evaluate_policy(snapshot, task, episodes=4, seed=3, processes=2, max_episode_steps=30, progress=False)
+    assert shared.episodes == alone.episodes
+    assert len({episode.reward for episode in alone.episodes}) > 1, "different seeds should place the block differently"
+
+
+def test_a_run_directory_means_its_latest_checkpoint_and_a_task_can_be_chosen(checkpoint, tmp_path, capsys):
+    out = tmp_path / "easy.json"
+    code = main(["evaluate", str(checkpoint.parent.parent), "--episodes", "2", "--processes", "1",
+                 "--task", "easiest,jp2=1.1", "--max-episode-steps", "15", "--json", str(out)])
+    assert code == 0
+    written = json.loads(out.read_text())
+    assert written["checkpoint"] == str(checkpoint)
+    assert written["task"] == {**KUKA_TASK_SPACE.easiest(), "jp2": 1.1}
+    assert max(written["per_episode"]["length"]) <= 15
+    assert "easiest task with jp2=1.1, 2 episodes" in capsys.readouterr().out
+
+
+def test_task_strings():
+    assert parse_task("hardest") == KUKA_TASK_SPACE.hardest()
+    assert parse_task("easiest") == KUKA_TASK_SPACE.easiest()
+    assert parse_task(" jp2 = 1.0 , rnd_obj_x=0.5") == {**KUKA_TASK_SPACE.hardest(), "jp2": 1.0, "rnd_obj_x": 0.5}
+    assert describe_task(parse_task("jp2=1.0")) == "hardest task with jp2=1"
+    for text, message in [("medium", "unknown task 'medium'"), ("jp2", "unknown task 'jp2'"),
+                          ("jp2=high", "'jp2' must be a number"), ("jp2=5", r"'jp2'=5.0 is outside its bounds"),
+                          ("grip=1", r"unknown task parameter\(s\) \['grip'\]"), ("jp2=1,jp2=1.1", "given twice"),
+                          ("", "empty task")]:
+        with pytest.raises(ValueError, match=message):
+            parse_task(text)
+
+
+def test_bad_input_is_refused_in_one_line(checkpoint, tmp_path, capsys):
+    assert main(["evaluate", str(tmp_path / "missing.pt")]) == 2
+    assert f"no checkpoint at {tmp_path / 'missing.pt'}" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path)]) == 2
+    assert "without checkpoints" in capsys.readouterr().err
+    (tmp_path / "notes.pt").write_text("not a checkpoint")
+    assert main(["evaluate", str(tmp_path / "notes.pt")]) == 2
+    assert "notes.pt is not a checkpoint this version can read" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["evaluate", str(checkpoint), "--task", "jp2=5"])
+    assert exit_info.value.code == 2
+    assert "jp2" in capsys.readouterr().err
