@@ -1,0 +1,397 @@
+"""The Docker deployment, checked without a Docker engine (none runs on these machines).
+
+Nothing is built or started here. What is checked: Debian's ``docker-compose config`` accepts
+``docker-compose.yml`` with ``.env.example``; every service's command is a real invocation of the
+program it runs (our own argparse sub-commands, Ray's click commands, TensorBoard's flags); ports,
+volumes and environment agree with each other and with the teacher's ``Settings``; and the
+``Dockerfile`` copies what exists and starts the console script.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import importlib
+import json
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import tomllib
+import warnings
+from pathlib import Path, PurePosixPath
+from typing import Any
+from urllib.parse import urlsplit
+
+import click
+import pytest
+import yaml
+
+from common.cli import COMMANDS
+from learner.cli import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
+from teacher_service.core.config import Settings
+
+ROOT = Path(__file__).resolve().parents[1]
+SERVICES = {"teacher", "ray-head", "ray-worker", "learner", "tensorboard"}
+TOKEN_HOLDERS = {"teacher", "learner"}
+"""The teacher checks the token; the learner writes with it and hands it to its rollout actors."""
+
+
+# --- reading the files --------------------------------------------------------------------------
+
+
+def read_env_file(path: Path) -> dict[str, str]:
+    entries = (line.strip() for line in path.read_text().splitlines())
+    return dict(entry.split("=", 1) for entry in entries if entry and not entry.startswith("#"))
+
+
+def compose_config(env_file: Path) -> subprocess.CompletedProcess[str]:
+    """``docker-compose config`` with only ``env_file`` as input: the caller's environment could override it."""
+    executable = shutil.which("docker-compose")
+    if executable is None:
+        message = "docker-compose is not installed (Debian package docker-compose; .ci/run installs it)"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    return subprocess.run(
+        [executable, "--project-directory", str(ROOT), "--env-file", str(env_file), "config"],
+        cwd=ROOT,
+        env={"PATH": os.environ["PATH"], "HOME": os.environ.get("HOME", "/tmp")},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def load_compose(env_file: Path) -> dict[str, Any]:
+    result = compose_config(env_file)
+    assert result.returncode == 0, f"docker-compose config rejects docker-compose.yml:\n{result.stderr}"
+    return yaml.safe_load(result.stdout)
+
+
+def dockerfile_instructions() -> list[tuple[str, str]]:
+    """(INSTRUCTION, arguments) pairs, with continuation lines joined and comments dropped."""
+    instructions: list[tuple[str, str]] = []
+    pending = ""
+    for line in (ROOT / "Dockerfile").read_text().splitlines():
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        pending += stripped.removesuffix("\\").strip() + " "
+        if not stripped.endswith("\\"):
+            keyword, _, arguments = pending.strip().partition(" ")
+            instructions.append((keyword.upper(), arguments.strip()))
+            pending = ""
+    return instructions
+
+
+def dockerfile_values(keyword: str) -> list[str]:
+    return [arguments for instruction, arguments in dockerfile_instructions() if instruction == keyword]
+
+
+def service_commands(service: dict[str, Any]) -> list[list[str]]:
+    """The argument vectors a container runs: entrypoint plus command, falling back on the image's."""
+    entrypoint = service.get("entrypoint") or json.loads(dockerfile_values("ENTRYPOINT")[-1])
+    command = service.get("command") or json.loads(dockerfile_values("CMD")[-1])
+    argv = [*entrypoint, *command]
+    if argv[:2] != ["/bin/sh", "-c"]:
+        return [argv]
+    commands = [shlex.split(part) for part in argv[2].split("&&")]
+    return [words[1:] if words[0] == "exec" else words for words in commands]
+
+
+def command_of(service: dict[str, Any], program: str, subcommand: str) -> list[str]:
+    """The one invocation of ``program subcommand`` among the service's commands."""
+    matches = [argv for argv in service_commands(service) if argv[:2] == [program, subcommand]]
+    assert len(matches) == 1, f"expected one `{program} {subcommand}` in {service_commands(service)}"
+    return matches[0]
+
+
+# --- parsing commands with the real command-line interfaces -------------------------------------
+
+
+def parse_kuka_curriculum(argv: list[str]) -> argparse.Namespace:
+    name, *arguments = argv[1:]
+    assert name in COMMANDS, f"kuka-curriculum has no sub-command {name!r} (has: {', '.join(COMMANDS)})"
+    parser = argparse.ArgumentParser(prog=f"kuka-curriculum {name}")
+    importlib.import_module(COMMANDS[name][0]).add_arguments(parser)
+    try:
+        return parser.parse_args(arguments)
+    except SystemExit:
+        pytest.fail(f"kuka-curriculum rejects `{shlex.join(argv)}` (its message is in the captured stderr)")
+
+
+def parse_ray(argv: list[str]) -> dict[str, Any]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # Ray's CLI module imports Ray Serve's pydantic v1-style models
+        from ray.scripts.scripts import cli
+
+    name, *arguments = argv[1:]
+    assert name in cli.commands, f"ray has no command {name!r}"
+    try:
+        return cli.commands[name].make_context(f"ray {name}", arguments).params
+    except click.ClickException as error:
+        pytest.fail(f"ray rejects `{shlex.join(argv)}`: {error.format_message()}")
+
+
+def parse_tensorboard(argv: list[str]) -> argparse.Namespace:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # TensorBoard's vendored html5lib warns as plugins load
+        from tensorboard import program
+
+        board = program.TensorBoard()
+        try:
+            board.configure(argv=argv)
+        except SystemExit:
+            pytest.fail(f"tensorboard rejects `{shlex.join(argv)}` (its message is in the captured stderr)")
+    return board.flags
+
+
+PARSERS = {"kuka-curriculum": parse_kuka_curriculum, "ray": parse_ray, "tensorboard": parse_tensorboard}
+
+
+# --- fixtures ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def env_example() -> dict[str, str]:
+    return read_env_file(ROOT / ".env.example")
+
+
+@pytest.fixture(scope="module")
+def compose() -> dict[str, Any]:
+    return load_compose(ROOT / ".env.example")
+
+
+@pytest.fixture(scope="module")
+def services(compose: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    return compose["services"]
+
+
+@pytest.fixture(scope="module")
+def compose_volumes(compose: dict[str, Any]) -> set[str]:
+    return set(compose["volumes"])
+
+
+def ports_of(service: dict[str, Any]) -> list[tuple[str, int, int]]:
+    """(host interface, host port, container port) for each published port."""
+    published = []
+    for entry in service.get("ports", []):
+        if isinstance(entry, dict):
+            published.append((entry.get("host_ip", ""), int(entry["published"]), int(entry["target"])))
+        else:
+            *host_ip, host_port, container_port = entry.split("/")[0].rsplit(":", 2)
+            published.append(("".join(host_ip), int(host_port), int(container_port)))
+    return published
+
+
+def mounts_of(service: dict[str, Any]) -> dict[PurePosixPath, tuple[str, bool]]:
+    """Container path -> (volume name, read-only) for each mount."""
+    mounts = {}
+    for entry in service.get("volumes", []):
+        if isinstance(entry, dict):
+            mounts[PurePosixPath(entry["target"])] = (entry["source"], bool(entry.get("read_only")))
+        else:
+            source, target, *mode = entry.split(":")
+            mounts[PurePosixPath(target)] = (source, mode == ["ro"])
+    return mounts
+
+
+def environment_of(service: dict[str, Any]) -> dict[str, str]:
+    environment = service.get("environment", {})
+    if isinstance(environment, list):
+        return dict(entry.split("=", 1) for entry in environment)
+    return {name: str(value) for name, value in environment.items()}
+
+
+def volume_holding(service: dict[str, Any], path: str) -> tuple[str, bool]:
+    for target, mount in mounts_of(service).items():
+        if PurePosixPath(path).is_relative_to(target):
+            return mount
+    pytest.fail(f"{path} is on no volume of the service (mounts: {service.get('volumes', [])})")
+
+
+# --- docker-compose.yml ---------------------------------------------------------------------------
+
+
+def test_compose_file_is_valid_and_has_every_role(services: dict[str, dict[str, Any]]) -> None:
+    assert set(services) == SERVICES
+
+
+def test_compose_refuses_to_run_without_a_teacher_token(tmp_path: Path) -> None:
+    no_token = tmp_path / "no-token.env"
+    no_token.write_text("TEACHER=alp-gmm\n")
+    result = compose_config(no_token)
+    assert result.returncode != 0
+    assert "KC_TEACHER_TOKEN" in result.stderr
+
+
+@pytest.mark.parametrize("name", sorted(SERVICES))
+def test_every_command_is_accepted_by_the_program_it_runs(services: dict[str, dict[str, Any]], name: str) -> None:
+    service = services[name]
+    healthcheck = service.get("healthcheck", {}).get("test", [])
+    commands = service_commands(service)
+    if healthcheck[:2] == ["CMD", "ray"]:
+        commands.append(healthcheck[1:])
+    for argv in commands:
+        assert argv[0] in PARSERS, f"{name} runs {argv[0]!r}, which is neither kuka-curriculum, ray nor tensorboard"
+        PARSERS[argv[0]](argv)
+
+
+def test_published_ports_listen_on_loopback_only(services: dict[str, dict[str, Any]]) -> None:
+    published = {name: ports_of(service) for name, service in services.items() if "ports" in service}
+    assert set(published) == {"teacher", "ray-head", "tensorboard"}
+    for name, ports in published.items():
+        for host_ip, _, _ in ports:
+            assert host_ip == "127.0.0.1", f"{name} publishes a port on {host_ip or 'every interface'}"
+
+
+def test_teacher_is_reached_where_it_listens(services: dict[str, dict[str, Any]]) -> None:
+    teacher = services["teacher"]
+    args = parse_kuka_curriculum(command_of(teacher, "kuka-curriculum", "serve"))
+    settings = Settings(**{name: value for name, value in vars(args).items() if value is not None})
+    assert settings.host == "0.0.0.0", "a service bound to the container's loopback is unreachable from the others"
+    assert [target for _, _, target in ports_of(teacher)] == [settings.port]
+
+    probe = " ".join(teacher["healthcheck"]["test"])
+    health_url = urlsplit(re.search(r"http://[^'\" ]+", probe).group())
+    assert (health_url.port, health_url.path) == (settings.port, "/healthz")
+
+    train = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
+    assert urlsplit(train.teacher_url)[:2] == ("http", f"teacher:{settings.port}")
+
+
+def test_teacher_database_lives_on_a_named_volume(services: dict[str, dict[str, Any]], compose_volumes: set[str]) -> None:
+    teacher = services["teacher"]
+    args = parse_kuka_curriculum(command_of(teacher, "kuka-curriculum", "serve"))
+    database = Settings(**({"db": args.db} if args.db else {})).db
+    assert database.is_absolute(), "a relative database path would land in the image's working directory"
+    volume, read_only = volume_holding(teacher, str(database))
+    assert volume in compose_volumes and not read_only
+
+
+def test_ray_nodes_join_the_head_by_service_name(services: dict[str, dict[str, Any]]) -> None:
+    head = parse_ray(command_of(services["ray-head"], "ray", "start"))
+    assert head["head"] and head["block"]
+    head_address = f"ray-head:{head['port']}"
+
+    worker = parse_ray(command_of(services["ray-worker"], "ray", "start"))
+    assert worker["address"] == head_address and worker["block"]
+    learner_node = parse_ray(command_of(services["learner"], "ray", "start"))
+    assert learner_node["address"] == head_address
+    assert learner_node["num_cpus"] == 0, "rollout actors belong on the workers, not beside the learner"
+    train = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
+    assert train.ray_address == head_address
+
+    health = parse_ray(services["ray-head"]["healthcheck"]["test"][1:])
+    assert health["address"].endswith(f":{head['port']}")
+
+
+def test_ray_dashboard_is_published(services: dict[str, dict[str, Any]]) -> None:
+    head = parse_ray(command_of(services["ray-head"], "ray", "start"))
+    assert head["include_dashboard"] is True, "left to Ray, a missing dashboard dependency would go unnoticed"
+    assert head["dashboard_host"] == "0.0.0.0"
+    assert [target for _, _, target in ports_of(services["ray-head"])] == [head["dashboard_port"]]
+
+
+def test_ray_workers_can_be_scaled(services: dict[str, dict[str, Any]]) -> None:
+    worker = services["ray-worker"]
+    assert "container_name" not in worker, "a fixed container name allows one replica only"
+    assert "ports" not in worker, "a published host port allows one replica only"
+
+
+def test_learner_waits_for_a_healthy_teacher_and_head(services: dict[str, dict[str, Any]]) -> None:
+    depends_on = services["learner"]["depends_on"]
+    for dependency in ("teacher", "ray-head"):
+        assert depends_on[dependency]["condition"] == "service_healthy"
+        assert services[dependency]["healthcheck"]["test"]
+
+
+def test_tensorboard_reads_the_learner_run_directory(services: dict[str, dict[str, Any]], compose_volumes: set[str]) -> None:
+    learner = services["learner"]
+    train = parse_kuka_curriculum(command_of(learner, "kuka-curriculum", "train"))
+    run_volume, read_only = volume_holding(learner, str(train.run_dir))
+    assert run_volume in compose_volumes and not read_only
+
+    board = services["tensorboard"]
+    flags = parse_tensorboard(service_commands(board)[0])
+    assert flags.host == "0.0.0.0"
+    assert [target for _, _, target in ports_of(board)] == [flags.port]
+    assert volume_holding(board, flags.logdir) == (run_volume, True)
+
+
+def test_environment_names_are_read_by_the_programs(services: dict[str, dict[str, Any]], env_example: dict[str, str]) -> None:
+    prefix = Settings.model_config["env_prefix"]
+    known = {prefix + field.upper() for field in Settings.model_fields}
+    assert LEARNER_TOKEN_VARIABLE in known, "the learner must send the token from the variable the teacher reads it from"
+    for name, service in services.items():
+        for variable in environment_of(service):
+            if variable.startswith(prefix):
+                assert variable in known, f"{name} sets {variable}, which no Settings field reads"
+
+    holders = {name for name, service in services.items() if LEARNER_TOKEN_VARIABLE in environment_of(service)}
+    assert holders == TOKEN_HOLDERS
+    tokens = {environment_of(services[name])[LEARNER_TOKEN_VARIABLE] for name in holders}
+    assert tokens == {env_example[LEARNER_TOKEN_VARIABLE]}
+
+
+def test_env_file_drives_the_training_run(
+    tmp_path: Path, env_example: dict[str, str], services: dict[str, dict[str, Any]]
+) -> None:
+    chosen = {"TEACHER": "manual", "TOTAL_STEPS": "12345", "ROLLOUT_WORKERS": "6", "ENVS_PER_WORKER": "3", "SEED": "7"}
+    assert set(chosen) <= set(env_example), ".env.example should list every setting a user is expected to change"
+    env_file = tmp_path / "custom.env"
+    env_file.write_text("".join(f"{name}={value}\n" for name, value in {**env_example, **chosen}.items()))
+
+    train = parse_kuka_curriculum(command_of(load_compose(env_file)["services"]["learner"], "kuka-curriculum", "train"))
+    assert (train.teacher, train.total_steps, train.workers, train.envs_per_worker, train.seed) == ("manual", 12345, 6, 3, 7)
+
+    defaults = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
+    assert defaults.teacher == env_example["TEACHER"]
+
+
+# --- Dockerfile ------------------------------------------------------------------------------------
+
+
+def test_dockerfile_copies_every_package_and_nothing_missing_or_ignored() -> None:
+    ignored = [line.strip() for line in (ROOT / ".dockerignore").read_text().splitlines() if line.strip() and not line.startswith("#")]
+    sources = [source for arguments in dockerfile_values("COPY") for source in arguments.split()[:-1]]
+    for source in sources:
+        assert (ROOT / source).exists(), f"COPY {source}: no such file in the build context"
+        assert not any(fnmatch.fnmatch(source, pattern) for pattern in ignored), f"COPY {source}, but .dockerignore drops it"
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    packages = {pattern.rstrip("*") for pattern in project["tool"]["setuptools"]["packages"]["find"]["include"]}
+    assert packages <= set(sources), f"the image misses packages: {sorted(packages - set(sources))}"
+    assert project["project"]["readme"] in sources, "pip install needs the readme pyproject.toml names"
+
+
+def test_image_starts_the_console_script(capsys: pytest.CaptureFixture[str]) -> None:
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    [program] = json.loads(dockerfile_values("ENTRYPOINT")[-1])
+    assert program in scripts, f"ENTRYPOINT {program!r} is not a console script of pyproject.toml"
+
+    module_path, _, function = scripts[program].partition(":")
+    with pytest.raises(SystemExit) as exit_info:
+        getattr(importlib.import_module(module_path), function)(json.loads(dockerfile_values("CMD")[-1]))
+    assert exit_info.value.code == 0
+    usage = capsys.readouterr().out
+    assert all(name in usage for name in COMMANDS), "a bare `docker run` should list the sub-commands"
+
+
+def test_torch_comes_from_the_index_the_build_argument_names(services: dict[str, dict[str, Any]], env_example: dict[str, str]) -> None:
+    default_index = dict(argument.split("=", 1) for argument in dockerfile_values("ARG"))["TORCH_INDEX_URL"]
+    assert default_index.endswith("/whl/cpu")
+    torch_install = next(run for run in dockerfile_values("RUN") if run.split()[-1] == "torch")
+    assert '--index-url "$TORCH_INDEX_URL"' in torch_install and "--constraint constraints.txt" in torch_install
+
+    for name, service in services.items():
+        assert service["build"]["args"]["TORCH_INDEX_URL"] == env_example["TORCH_INDEX_URL"], name
+    assert env_example["TORCH_INDEX_URL"] == default_index
+
+
+def test_image_exposes_every_published_container_port(services: dict[str, dict[str, Any]]) -> None:
+    exposed = {int(port) for arguments in dockerfile_values("EXPOSE") for port in arguments.split()}
+    published = {target for service in services.values() for _, _, target in ports_of(service)}
+    assert published <= exposed
