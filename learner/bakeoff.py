@@ -26,14 +26,13 @@ import numpy as np
 from tqdm import tqdm
 
 from common.task_space import KUKA_TASK_SPACE
+from learner.arguments import int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.config import TrainConfig
 from learner.evaluate import (
     EvaluationResult,
     UsageError,
     evaluate_checkpoint,
-    int_at_least,
-    positive_int,
     write_json,
 )
 from learner.metrics import METRICS_FILE

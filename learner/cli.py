@@ -19,6 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from learner.arguments import non_negative_int, positive_int
 from learner.config import TEACHERS, TrainConfig
 
 DEFAULTS = TrainConfig()
@@ -36,43 +37,26 @@ class UsageError(Exception):
     """Bad input or an unreachable service: reported in one line, exit code 2."""
 
 
-def _int_at_least(minimum: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text.replace("_", ""))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
-        return value
-
-    return parse
-
-
-_positive_int = _int_at_least(1)
-_non_negative_int = _int_at_least(0)
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     run = parser.add_argument_group("run")
     run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
-    run.add_argument("--total-steps", type=_positive_int,
+    run.add_argument("--total-steps", type=positive_int,
                      help=f"environment steps to train for (default {DEFAULTS.total_steps:_})")
-    run.add_argument("--workers", type=_positive_int, help=f"rollout actors (default {DEFAULTS.workers})")
-    run.add_argument("--envs-per-worker", type=_positive_int,
+    run.add_argument("--workers", type=positive_int, help=f"rollout actors (default {DEFAULTS.workers})")
+    run.add_argument("--envs-per-worker", type=positive_int,
                      help=f"environments per actor (default {DEFAULTS.envs_per_worker})")
-    run.add_argument("--rollout-length", type=_positive_int,
+    run.add_argument("--rollout-length", type=positive_int,
                      help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})")
-    run.add_argument("--max-episode-steps", type=_positive_int,
+    run.add_argument("--max-episode-steps", type=positive_int,
                      help=f"episode step limit (default {DEFAULTS.max_episode_steps})")
     run.add_argument("--seed", type=int,
                      help=f"seed for the network, environments and teacher (default {DEFAULTS.seed})")
-    run.add_argument("--checkpoint-every", type=_positive_int,
+    run.add_argument("--checkpoint-every", type=positive_int,
                      help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})")
-    run.add_argument("--eval-every", type=_non_negative_int,
+    run.add_argument("--eval-every", type=non_negative_int,
                      help="iterations between evaluations on the hardest task, 0 for none "
                           f"(default {DEFAULTS.eval_every})")
-    run.add_argument("--eval-episodes", type=_positive_int,
+    run.add_argument("--eval-episodes", type=positive_int,
                      help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})")
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")

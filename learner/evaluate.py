@@ -15,7 +15,6 @@ import math
 import os
 import pickle
 import sys
-from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -30,6 +29,7 @@ from common.kuka_env import KukaGraspEnv
 from common.policy import InferencePolicy, PolicySnapshot, PolicySpec
 from common.task_space import KUKA_TASK_SPACE, Task
 from common.trajectory import EpisodeStats
+from learner.arguments import positive_int
 from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 from learner.ppo import PPOLearner
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
@@ -246,24 +246,6 @@ def evaluate_checkpoint(
         policy_snapshot(checkpoint), task, episodes, seed, processes,
         max_episode_steps or checkpoint.config.max_episode_steps, progress,
     )
-
-
-def int_at_least(minimum: int) -> Callable[[str], int]:
-    """An argparse type: a whole number (underscores allowed, as in 2_000_000) of at least ``minimum``."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text.replace("_", ""))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
-        return value
-
-    return parse
-
-
-positive_int = int_at_least(1)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
