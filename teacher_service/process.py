@@ -30,7 +30,9 @@ class ServiceProcess:
     """``kuka-curriculum serve`` on ``db``; ``start`` waits until ``/healthz`` answers.
 
     The port is chosen once, so a restart (``kill`` then ``start``) serves at the same URL.
-    The child's output goes to ``log_path`` (next to the database by default).
+    The child's output goes to ``log_path`` (next to the database by default). With
+    ``own_session`` the child leaves the caller's session, so a Ctrl-C meant for the caller does
+    not stop the service before the caller has delivered its last results.
     """
 
     def __init__(
@@ -41,12 +43,14 @@ class ServiceProcess:
         port: int | None = None,
         env: Mapping[str, str] | None = None,
         log_path: Path | None = None,
+        own_session: bool = False,
     ) -> None:
         self.db = Path(db)
         self.host = host
         self.port = port or free_port(host)
         self.env = {**os.environ, **(env or {})}
         self.log_path = log_path or self.db.with_suffix(".log")
+        self.own_session = own_session
         self._process: subprocess.Popen[bytes] | None = None
 
     @property
@@ -66,7 +70,9 @@ class ServiceProcess:
         command = [sys.executable, "-m", "common.cli", "serve", "--host", self.host, "--port", str(self.port),
                    "--db", str(self.db), "--log-level", "warning"]
         with self.log_path.open("ab") as log:
-            self._process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=self.env)
+            self._process = subprocess.Popen(
+                command, stdout=log, stderr=subprocess.STDOUT, env=self.env, start_new_session=self.own_session
+            )
         self._wait_healthy(timeout)
         return self
 
@@ -75,7 +81,7 @@ class ServiceProcess:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
-                raise RuntimeError(f"the service exited with code {self._process.returncode}:\n{self._log_tail()}")
+                raise RuntimeError(f"the teacher service at {self.url} exited with code {self._process.returncode}:\n{self._log_tail()}")
             try:
                 if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
                     return
@@ -83,7 +89,7 @@ class ServiceProcess:
                 pass
             time.sleep(0.05)
         self.kill()
-        raise RuntimeError(f"the service did not answer /healthz within {timeout} s:\n{self._log_tail()}")
+        raise RuntimeError(f"the teacher service did not answer {self.url}/healthz within {timeout:.0f} s:\n{self._log_tail()}")
 
     def _log_tail(self, lines: int = 30) -> str:
         return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])

@@ -11,7 +11,7 @@ from common.policy import PolicySpec
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import TrainConfig
 from learner.ppo import PPOLearner
-from learner.teacher_process import free_port
+from teacher_service.process import free_port
 
 
 def test_a_bad_flag_is_refused_by_name(capsys):

@@ -16,7 +16,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from common.schemas import API_PREFIX
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.cli import curriculum_name
-from learner.teacher_process import free_port, local_teacher_service
+from learner.teacher_process import local_teacher_service
+from teacher_service.process import free_port
 
 SMALL_RUN = [
     "--teacher", "random", "--workers", "2", "--envs-per-worker", "2", "--rollout-length", "250",
