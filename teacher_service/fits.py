@@ -23,6 +23,8 @@ from multiprocessing.process import BaseProcess
 from multiprocessing.queues import Queue
 from typing import Any
 
+from threadpoolctl import threadpool_limits
+
 from teacher_service.teachers import FitJob
 
 log = logging.getLogger(__name__)
@@ -55,8 +57,12 @@ def run_fit(job: FitJob) -> FitOutcome:
 
 def _fit_forever(jobs: Queue[FitJob | None], outcomes: Queue[FitOutcome]) -> None:
     """Fit until told to stop, or until the service is gone: a killed service sends no word, and
-    the queues' pipes stay open because this process holds both of their ends."""
+    the queues' pipes stay open because this process holds both of their ends.
+
+    One BLAS thread: the mixtures are small, and a second thread spinning for work takes the core
+    that the service needs to answer requests."""
     os.nice(FIT_NICENESS)
+    threadpool_limits(limits=1)
     outcomes.cancel_join_thread()
     service = multiprocessing.parent_process()
     while service is None or service.is_alive():
