@@ -21,16 +21,19 @@ class NormalizerState:
     count: float
 
 
+NORMALIZER_EPSILON = 1e-8
+"""Added to the variance before its square root, so a constant dimension does not divide by zero."""
+
+
 class RunningNormalizer:
     """Per-dimension running mean and variance (parallel Welford), with clipping of the result."""
 
-    def __init__(self, size: int, clip: float = 10.0, epsilon: float = 1e-8) -> None:
+    def __init__(self, size: int, clip: float = 10.0) -> None:
         if size < 1:
             raise ValueError(f"normaliser size must be positive, got {size}")
         if clip <= 0:
             raise ValueError(f"normaliser clip must be positive, got {clip}")
         self.clip = float(clip)
-        self.epsilon = float(epsilon)
         self.mean = np.zeros(size, dtype=np.float64)
         self.var = np.ones(size, dtype=np.float64)
         self.count = 0.0
@@ -51,7 +54,7 @@ class RunningNormalizer:
         self.count = total
 
     def normalize(self, observations: np.ndarray) -> np.ndarray:
-        scaled = (np.asarray(observations, dtype=np.float64) - self.mean) / np.sqrt(self.var + self.epsilon)
+        scaled = (np.asarray(observations, dtype=np.float64) - self.mean) / np.sqrt(self.var + NORMALIZER_EPSILON)
         return np.clip(scaled, -self.clip, self.clip).astype(np.float32)
 
     def state(self) -> NormalizerState:

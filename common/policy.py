@@ -14,9 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
-from torch.nn import functional as F
 
-from common.normalizer import NormalizerState, RunningNormalizer
+from common.normalizer import NORMALIZER_EPSILON, NormalizerState, RunningNormalizer
 
 
 @dataclass(frozen=True)
@@ -92,44 +91,50 @@ class PolicySnapshot:
 
 
 class InferencePolicy:
-    """Numpy-in, numpy-out policy for stepping environments; no gradients.
+    """Numpy-in, numpy-out policy for stepping environments; no gradients, no torch.
 
-    At the batch sizes of environment stepping, torch's per-operation overhead, not arithmetic, is
-    the cost. So the actor and critic MLPs are fused into one block-diagonal MLP when weights are
-    loaded (half the operations), and the Gaussian's few element-wise operations run in numpy.
+    At the batch sizes of environment stepping (a handful of observations), per-operation overhead,
+    not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
+    arrays are used as they come, the actor and critic MLPs are fused into one block-diagonal MLP
+    when weights are loaded (half the operations), and the observation normaliser's scale is
+    precomputed. ``ActorCritic.evaluate`` is the reference these numbers must match.
     """
 
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
         self.spec = snapshot.spec
         self.rng = np.random.default_rng(seed)
-        self.normalizer = RunningNormalizer(snapshot.spec.obs_dim, clip=snapshot.obs_clip)
-        self._network = ActorCritic(snapshot.spec)
         self.version = -1
         self.load(snapshot)
 
     def load(self, snapshot: PolicySnapshot) -> None:
         if snapshot.spec != self.spec:
             raise ValueError(f"snapshot is for {snapshot.spec}, this policy is {self.spec}")
-        self._network.load_state_dict({name: torch.from_numpy(array) for name, array in snapshot.weights.items()})
-        actor = [m for m in self._network.actor_mean if isinstance(m, nn.Linear)]
-        critic = [m for m in self._network.critic if isinstance(m, nn.Linear)]
-        first = (torch.cat([actor[0].weight, critic[0].weight]), torch.cat([actor[0].bias, critic[0].bias]))
-        rest = [(torch.block_diag(a.weight, c.weight), torch.cat([a.bias, c.bias]))
-                for a, c in zip(actor[1:], critic[1:])]
-        self._layers = [(weight.detach().clone(), bias.detach().clone()) for weight, bias in [first, *rest]]
-        log_std = snapshot.weights["actor_log_std"].astype(np.float64)
+        weights = snapshot.weights
+        depth = len(self.spec.hidden_sizes) + 1
+        actor = [(weights[f"actor_mean.{2 * i}.weight"], weights[f"actor_mean.{2 * i}.bias"]) for i in range(depth)]
+        critic = [(weights[f"critic.{2 * i}.weight"], weights[f"critic.{2 * i}.bias"]) for i in range(depth)]
+        fused = [(np.concatenate([actor[0][0], critic[0][0]]), np.concatenate([actor[0][1], critic[0][1]]))]
+        fused += [(_block_diagonal(a_weight, c_weight), np.concatenate([a_bias, c_bias]))
+                  for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:])]
+        # Stored as (in, out) so a layer is one ``x @ w + b``.
+        self._layers = [(np.ascontiguousarray(w.T, dtype=np.float32), b.astype(np.float32)) for w, b in fused]
+        log_std = weights["actor_log_std"].astype(np.float64)
         self._std = np.exp(log_std).astype(np.float32)
         self._log_density_offset = float((log_std + _LOG_SQRT_2PI).sum())
-        self.normalizer.load_state(snapshot.normalizer)
+        stats = snapshot.normalizer
+        self._obs_mean = np.asarray(stats.mean, dtype=np.float64)
+        self._obs_inverse_scale = 1.0 / np.sqrt(np.asarray(stats.var, dtype=np.float64) + NORMALIZER_EPSILON)
+        self._obs_clip = snapshot.obs_clip
         self.version = snapshot.version
 
-    @torch.inference_mode()
     def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Action means (n, action_dim) and values (n,)."""
-        hidden = torch.from_numpy(self.normalizer.normalize(np.atleast_2d(observations)))
+        scaled = (np.atleast_2d(observations) - self._obs_mean) * self._obs_inverse_scale
+        hidden = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
         for weight, bias in self._layers[:-1]:
-            hidden = torch.tanh(F.linear(hidden, weight, bias))
-        output = F.linear(hidden, *self._layers[-1]).numpy()
+            hidden = np.tanh(hidden @ weight + bias)
+        weight, bias = self._layers[-1]
+        output = hidden @ weight + bias
         return output[:, : self.spec.action_dim], output[:, self.spec.action_dim]
 
     def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,3 +149,10 @@ class InferencePolicy:
 
     def value(self, observations: np.ndarray) -> np.ndarray:
         return self._forward(observations)[1]
+
+
+def _block_diagonal(upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    joined = np.zeros((upper.shape[0] + lower.shape[0], upper.shape[1] + lower.shape[1]), dtype=upper.dtype)
+    joined[: upper.shape[0], : upper.shape[1]] = upper
+    joined[upper.shape[0] :, upper.shape[1] :] = lower
+    return joined
