@@ -153,7 +153,8 @@ def _register_curriculum(url: str, name: str, config: TrainConfig, token: str | 
 
     with TeacherClient(url, name, token=token) as client:
         try:
-            client.register(config.teacher, KUKA_TASK_SPACE, seed=config.seed, timeout=TEACHER_CONNECT_TIMEOUT_S)
+            client.register(config.teacher, KUKA_TASK_SPACE, params=config.teacher_params, seed=config.seed,
+                            timeout=TEACHER_CONNECT_TIMEOUT_S)
         except TeacherClientError as error:
             raise UsageError(f"cannot register curriculum {name!r} at {url}: {error}") from None
 

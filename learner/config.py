@@ -15,8 +15,8 @@ from typing import Any
 class PPOConfig:
     rollout_length: int = 512
     """Steps each environment collects per iteration; batch = workers x envs per worker x this."""
-    gamma: float = 0.995
-    """Discount factor; episodes last hundreds of steps and the success bonus comes at the end."""
+    gamma: float = 0.999
+    """Discount; the grasp bonus comes ~800 steps in (0.999 keeps 45% of it, 0.995 2%: PPO then hits the tray early)."""
     gae_lambda: float = 0.95
     """GAE bias/variance trade-off (1 = Monte Carlo returns, 0 = one-step TD)."""
     learning_rate: float = 3e-4
@@ -67,6 +67,13 @@ class PPOConfig:
 
 TEACHERS = ("alp-gmm", "manual", "random", "fixed")
 
+KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
+    "alp-gmm": {"reward_range": [-5.0, 10.0]},
+}
+"""Teacher parameters for the KUKA curriculum, on top of each teacher's own defaults. ALP-GMM
+clusters learning progress together with task coordinates rescaled to [0, 1]; mapping the scaled
+return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on the same scale."""
+
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -100,6 +107,11 @@ class TrainConfig:
         _require(self.checkpoint_every >= 1, "checkpoint_every must be at least 1")
         _require(self.eval_every >= 0, "eval_every must be 0 (never) or more")
         _require(self.eval_episodes >= 1, "eval_episodes must be at least 1")
+
+    @property
+    def teacher_params(self) -> dict[str, Any]:
+        """What the curriculum is registered with (see ``KUKA_TEACHER_PARAMS``)."""
+        return dict(KUKA_TEACHER_PARAMS.get(self.teacher, {}))
 
     @property
     def batch_size(self) -> int:

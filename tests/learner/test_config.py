@@ -1,6 +1,8 @@
 import pytest
 
-from learner.config import PPOConfig, TrainConfig
+from common.task_space import KUKA_TASK_SPACE
+from learner.config import TEACHERS, PPOConfig, TrainConfig
+from teacher_service.teachers import make_teacher
 
 
 def test_config_survives_a_round_trip_through_a_plain_dict():
@@ -39,3 +41,15 @@ def test_every_setting_has_a_one_line_doc():
                 following = body[index + 1] if index + 1 < len(body) else None
                 assert isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant), statement.target.id
                 assert "\n" not in following.value.value.strip(), statement.target.id
+
+
+@pytest.mark.parametrize("teacher", TEACHERS)
+def test_every_teacher_accepts_the_parameters_training_registers_it_with(teacher):
+    params = TrainConfig(teacher=teacher).teacher_params
+    make_teacher(teacher, KUKA_TASK_SPACE, seed=0, params=params)
+
+
+def test_alp_gmm_sees_a_miss_and_a_grasp_at_opposite_ends_of_its_reward_range():
+    low, high = TrainConfig(teacher="alp-gmm").teacher_params["reward_range"]
+    zero_action_miss, grasp = -3.2, 9.0  # REFERENCE.md section 4; a grasp pays ~10 less the distance penalties
+    assert low <= zero_action_miss < 0.5 * (low + high) < grasp <= high
