@@ -76,6 +76,9 @@ class KukaGraspEnv(gymnasium.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 240}  # one step is 1/240 s of physics
+    angle_indices = (3, 4, 5, 8)
+    """Observation entries that are angles in [-pi, pi]: the gripper's roll, pitch and yaw, and the
+    block's yaw in the gripper's frame. The roll of a gripper pointing down sits at +-pi."""
 
     def __init__(
         self,

@@ -3,7 +3,8 @@
 A Gaussian policy with a state-independent log standard deviation; actions are sampled unbounded
 and clipped to the action box by whoever steps the environment, so log-probabilities stay exact.
 Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store) and
-run it through ``InferencePolicy``, which applies the observation normalisation it was trained with.
+run it through ``InferencePolicy``, which prepares observations as in training: angles become
+(sin, cos) features (``ObservationFeatures``), then the normaliser's statistics apply.
 """
 
 from __future__ import annotations
@@ -26,6 +27,40 @@ class PolicySpec:
     action_dim: int
     hidden_sizes: tuple[int, ...] = (64, 64)
     init_log_std: float = -0.5
+    angle_indices: tuple[int, ...] = ()
+    """Observation entries that are angles in [-pi, pi]; the networks see each as (sin, cos)."""
+
+    def __post_init__(self) -> None:
+        if len(set(self.angle_indices)) != len(self.angle_indices) or not all(
+            0 <= index < self.obs_dim for index in self.angle_indices
+        ):
+            raise ValueError(f"angle_indices must be distinct observation indices below {self.obs_dim}, "
+                             f"got {self.angle_indices}")
+
+    @property
+    def feature_dim(self) -> int:
+        """Width of the networks' input: every angle becomes two features."""
+        return self.obs_dim + len(self.angle_indices)
+
+
+class ObservationFeatures:
+    """Raw observations to network inputs: angles as (sin, cos), everything else unchanged.
+
+    An angle near +-pi (the gripper's roll, pointing down, flips sign from one step to the next)
+    is a jump of 2 pi to a network fed the raw number, and a normaliser turns it into noise of
+    unit size; on the circle it is no jump at all.
+    """
+
+    def __init__(self, spec: PolicySpec) -> None:
+        angles = set(spec.angle_indices)
+        self._plain = [index for index in range(spec.obs_dim) if index not in angles]
+        self._angles = list(spec.angle_indices)
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        if not self._angles:
+            return observations
+        angles = observations[..., self._angles]
+        return np.concatenate([observations[..., self._plain], np.sin(angles), np.cos(angles)], axis=-1)
 
 
 _LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
@@ -53,8 +88,8 @@ class ActorCritic(nn.Module):
         super().__init__()
         self.spec = spec
         hidden = list(spec.hidden_sizes)
-        self.actor_mean = _mlp([spec.obs_dim, *hidden, spec.action_dim], output_gain=0.01)
-        self.critic = _mlp([spec.obs_dim, *hidden, 1], output_gain=1.0)
+        self.actor_mean = _mlp([spec.feature_dim, *hidden, spec.action_dim], output_gain=0.01)
+        self.critic = _mlp([spec.feature_dim, *hidden, 1], output_gain=1.0)
         self.actor_log_std = nn.Parameter(torch.full((spec.action_dim,), float(spec.init_log_std)))
 
     def value(self, observations: torch.Tensor) -> torch.Tensor:
@@ -102,6 +137,7 @@ class InferencePolicy:
 
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
         self.spec = snapshot.spec
+        self._features = ObservationFeatures(self.spec)
         self.rng = np.random.default_rng(seed)
         self.version = -1
         self.load(snapshot)
@@ -129,7 +165,7 @@ class InferencePolicy:
 
     def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Action means (n, action_dim) and values (n,)."""
-        scaled = (np.atleast_2d(observations) - self._obs_mean) * self._obs_inverse_scale
+        scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
         hidden = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
         for weight, bias in self._layers[:-1]:
             hidden = np.tanh(hidden @ weight + bias)

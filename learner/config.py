@@ -47,6 +47,8 @@ class PPOConfig:
     """Hidden layer widths of the actor and of the critic (separate tanh MLPs)."""
     init_log_std: float = -0.5
     """Initial log standard deviation of the Gaussian policy (actions live in [-1, 1])."""
+    angle_features: bool = True
+    """Feed observed angles to the networks as (sin, cos): the gripper's roll wraps at +-pi every few steps."""
     obs_clip: float = 10.0
     """Normalised observations are clipped to +-this."""
     torch_threads: int = 1
@@ -125,6 +127,8 @@ class TrainConfig:
         known = {f.name for f in fields(cls)}
         values = {key: value for key, value in data.items() if key in known and key != "ppo"}
         ppo = dict(data.get("ppo", {}))
+        # Checkpoints from before ``angle_features`` existed were trained on raw angles.
+        ppo.setdefault("angle_features", False)
         if "hidden_sizes" in ppo:
             ppo["hidden_sizes"] = tuple(ppo["hidden_sizes"])
         return cls(**values, ppo=PPOConfig(**ppo))

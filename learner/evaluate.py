@@ -26,11 +26,12 @@ import torch
 from tqdm import tqdm
 
 from common.kuka_env import KukaGraspEnv
-from common.policy import InferencePolicy, PolicySnapshot, PolicySpec
+from common.policy import InferencePolicy, PolicySnapshot
 from common.task_space import KUKA_TASK_SPACE, Task
 from common.trajectory import EpisodeStats
 from learner.arguments import positive_int
 from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
+from learner.network import kuka_policy_spec
 from learner.ppo import PPOLearner
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
@@ -104,15 +105,7 @@ def read_checkpoint(path: Path) -> Checkpoint:
 
 def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
     """The policy a checkpoint holds, in the form the rollout workers act with."""
-    probe = KukaGraspEnv()
-    spec = PolicySpec(
-        obs_dim=probe.observation_space.shape[0],
-        action_dim=probe.action_space.shape[0],
-        hidden_sizes=checkpoint.config.ppo.hidden_sizes,
-        init_log_std=checkpoint.config.ppo.init_log_std,
-    )
-    probe.close()
-    learner = PPOLearner(spec, checkpoint.config.ppo, checkpoint.config.seed)
+    learner = PPOLearner(kuka_policy_spec(checkpoint.config.ppo), checkpoint.config.ppo, checkpoint.config.seed)
     learner.load_state_dict(checkpoint.learner)
     return learner.snapshot()
 

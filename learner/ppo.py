@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from common.normalizer import NormalizerState, RunningNormalizer
-from common.policy import ActorCritic, PolicySnapshot, PolicySpec
+from common.policy import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec
 from common.trajectory import TrajectoryBatch
 from learner.config import PPOConfig
 
@@ -51,7 +51,8 @@ class PPOLearner:
         self.optimizer = torch.optim.Adam(
             self.network.parameters(), lr=config.learning_rate, eps=config.adam_eps, fused=True
         )
-        self.normalizer = RunningNormalizer(spec.obs_dim, clip=config.obs_clip)
+        self.features = ObservationFeatures(spec)
+        self.normalizer = RunningNormalizer(spec.feature_dim, clip=config.obs_clip)
         self.shuffle = torch.Generator().manual_seed(seed)
         self.version = 0
 
@@ -73,7 +74,8 @@ class PPOLearner:
 
         gae = [compute_advantages(batch, cfg.gamma, cfg.gae_lambda) for batch in batches]
         raw_observations = np.concatenate([b.observations.reshape(-1, b.observations.shape[-1]) for b in batches])
-        observations = torch.from_numpy(self.normalizer.normalize(raw_observations))
+        features = self.features(raw_observations)
+        observations = torch.from_numpy(self.normalizer.normalize(features))
         actions = torch.from_numpy(np.concatenate([b.actions.reshape(-1, b.actions.shape[-1]) for b in batches]))
         old_log_probs = _flat(b.log_probs for b in batches)
         old_values = _flat(b.values for b in batches)
@@ -119,7 +121,7 @@ class PPOLearner:
             if cfg.target_kl is not None and approx_kl.item() > cfg.target_kl:
                 break
 
-        self.normalizer.update(raw_observations)
+        self.normalizer.update(features)
         self.version += 1
         metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
         metrics["learning_rate"] = learning_rate

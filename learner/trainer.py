@@ -18,13 +18,12 @@ import numpy as np
 import ray
 import torch
 
-from common.kuka_env import KukaGraspEnv
-from common.policy import PolicySpec
 from common.trajectory import EpisodeStats
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
 from learner.evaluation import evaluate_on_hardest_task
 from learner.metrics import MetricsLog
+from learner.network import kuka_policy_spec
 from learner.ppo import PPOLearner
 from rollout_worker.actor import WorkerSettings
 from rollout_worker.pool import WorkerPool
@@ -65,15 +64,7 @@ class Trainer:
         self.curriculum = curriculum
         self.teacher_token = teacher_token
         self.actor_name_prefix = actor_name_prefix
-        probe = KukaGraspEnv(max_steps=config.max_episode_steps)
-        spec = PolicySpec(
-            obs_dim=probe.observation_space.shape[0],
-            action_dim=probe.action_space.shape[0],
-            hidden_sizes=config.ppo.hidden_sizes,
-            init_log_std=config.ppo.init_log_std,
-        )
-        probe.close()
-        self.learner = PPOLearner(spec, config.ppo, config.seed)
+        self.learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, config.seed)
         self.counters = Counters()
         if resume_from is not None:
             self.learner.load_state_dict(resume_from.learner)

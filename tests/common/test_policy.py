@@ -3,19 +3,21 @@ import pytest
 import torch
 
 from common.normalizer import RunningNormalizer
-from common.policy import ActorCritic, InferencePolicy, PolicySnapshot, PolicySpec
+from common.policy import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
 
 
-@pytest.fixture()
-def trained_looking():
+@pytest.fixture(params=[(), (1, 3)], ids=["raw", "angles"])
+def trained_looking(request):
     """A network with non-trivial weights and a normaliser that has seen offset, scaled data."""
     torch.manual_seed(0)
-    network = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 6), init_log_std=-0.3))
+    spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 6), init_log_std=-0.3, angle_indices=request.param)
+    network = ActorCritic(spec)
     with torch.no_grad():
         for parameter in network.parameters():
             parameter.add_(0.3 * torch.randn_like(parameter))
-    normalizer = RunningNormalizer(5)
-    normalizer.update(np.random.default_rng(0).normal(50.0, 4.0, size=(200, 5)))
+    normalizer = RunningNormalizer(spec.feature_dim)
+    raw = np.random.default_rng(0).normal(50.0, 4.0, size=(200, 5))
+    normalizer.update(ObservationFeatures(spec)(raw))
     return network, normalizer
 
 
@@ -26,7 +28,7 @@ def test_inference_matches_the_training_network_on_normalised_observations(train
 
     actions, log_probs, values = policy.act(observations)
 
-    inputs = torch.from_numpy(normalizer.normalize(observations))
+    inputs = torch.from_numpy(normalizer.normalize(ObservationFeatures(network.spec)(observations)))
     expected_log_probs, _, expected_values = network.evaluate(inputs, torch.from_numpy(actions))
     assert log_probs == pytest.approx(expected_log_probs.detach().numpy(), abs=1e-4)
     assert values == pytest.approx(expected_values.detach().numpy(), abs=1e-5)
@@ -53,6 +55,25 @@ def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(traine
 def test_a_snapshot_of_another_shape_is_refused(trained_looking):
     network, normalizer = trained_looking
     policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0))
-    other = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,)))
+    other = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,), angle_indices=network.spec.angle_indices))
     with pytest.raises(ValueError, match="snapshot is for"):
         policy.load(PolicySnapshot.capture(other, normalizer, version=1))
+
+
+def test_an_angle_either_side_of_the_wrap_gives_nearly_the_same_features():
+    features = ObservationFeatures(PolicySpec(obs_dim=4, action_dim=1, angle_indices=(1, 3)))
+    just_below = np.array([[0.2, np.pi - 1e-3, 7.0, 0.5]])
+    just_above = np.array([[0.2, -np.pi + 1e-3, 7.0, 0.5]])
+
+    below, above = features(just_below), features(just_above)
+
+    assert below.shape == (1, 6)
+    assert below[0, :2] == pytest.approx([0.2, 7.0])
+    assert np.abs(below - above).max() < 3e-3
+    assert features(np.array([[0.0, 0.0, 0.0, np.pi / 2]]))[0, 2:] == pytest.approx([0.0, 1.0, 1.0, 0.0], abs=1e-12)
+
+
+@pytest.mark.parametrize("angles", [(2, 2), (5,), (-1,)])
+def test_angle_indices_must_name_distinct_observation_entries(angles):
+    with pytest.raises(ValueError, match="angle_indices"):
+        PolicySpec(obs_dim=5, action_dim=1, angle_indices=angles)

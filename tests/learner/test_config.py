@@ -11,6 +11,13 @@ def test_config_survives_a_round_trip_through_a_plain_dict():
     assert config.batch_size == 3 * config.envs_per_worker * config.ppo.rollout_length
 
 
+def test_a_config_saved_before_angle_features_existed_loads_as_trained_on_raw_angles():
+    saved = TrainConfig().to_dict()
+    del saved["ppo"]["angle_features"]
+    assert TrainConfig.from_dict(saved).ppo.angle_features is False
+    assert TrainConfig().ppo.angle_features is True
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from tiny_checkpoint import TINY_EPISODE_STEPS, save_untrained_checkpoint
@@ -96,3 +97,9 @@ def test_bad_input_is_refused_in_one_line(checkpoint, tmp_path, capsys):
         main(["evaluate", str(checkpoint), "--task", "jp2=5"])
     assert exit_info.value.code == 2
     assert "jp2" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model", sorted(Path(__file__).parents[2].joinpath("models").glob("*.pt")), ids=lambda p: p.name)
+def test_the_committed_policies_load_and_play(model, capsys):
+    assert main(["evaluate", str(model), "--episodes", "2"]) == 0
+    assert "hardest task, 2 episodes: return" in capsys.readouterr().out

@@ -7,9 +7,9 @@ import time
 import pytest
 
 from common.cli import main
-from common.policy import PolicySpec
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import TrainConfig
+from learner.network import kuka_policy_spec
 from learner.ppo import PPOLearner
 from teacher_service.process import free_port
 
@@ -44,7 +44,7 @@ def test_resume_needs_a_checkpoint_and_a_finished_run_is_not_overwritten(tmp_pat
     assert "no checkpoint" in capsys.readouterr().err
 
     config = TrainConfig()
-    learner = PPOLearner(PolicySpec(obs_dim=9, action_dim=3), config.ppo, seed=0)
+    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
     assert main(["train", "--run-dir", str(run_dir)]) == 2
     assert "pass --resume" in capsys.readouterr().err
