@@ -15,8 +15,7 @@ import math
 import os
 from collections.abc import Sequence
 
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
+from common.bullet import BulletClient, pybullet
 
 ARM_JOINTS = 7
 END_EFFECTOR_LINK = 6

@@ -20,11 +20,10 @@ from typing import Any
 
 import gymnasium
 import numpy as np
-import pybullet
 import pybullet_data
 from gymnasium import spaces
-from pybullet_utils.bullet_client import BulletClient
 
+from common.bullet import direct_client, pybullet
 from common.kuka_arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
 from common.task_space import KUKA_TASK_SPACE, Task
 
@@ -109,7 +108,7 @@ class KukaGraspEnv(gymnasium.Env):
         bound = np.array([WORLD_BOUND] * 3 + [math.pi] * 3 + [WORLD_BOUND] * 2 + [math.pi], dtype=np.float32)
         self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
 
-        self._client = client = BulletClient(connection_mode=pybullet.DIRECT)
+        self._client = client = direct_client()
         # Bound once: BulletClient builds a new partial on every attribute access.
         self._step_simulation = client.stepSimulation
         self._closest_points = client.getClosestPoints
