@@ -60,9 +60,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})")
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
-    where.add_argument("--resume", action="store_true",
-                       help="continue the run in --run-dir from its latest checkpoint; "
-                            "flags given override its saved settings")
+    resume = where.add_mutually_exclusive_group()
+    resume.add_argument("--resume", action="store_true",
+                        help="continue the run in --run-dir from its latest checkpoint; "
+                             "flags given override its saved settings")
+    resume.add_argument("--resume-if-exists", action="store_true",
+                        help="like --resume when --run-dir holds a checkpoint, else start the run there "
+                             "(for a supervisor that restarts the learner, such as Docker Compose)")
     where.add_argument("--teacher-url", help="a running teacher service (default: start one for this run)")
     where.add_argument("--ray-address", help="a running Ray cluster, host:port (default: start a local one)")
 
@@ -101,13 +105,14 @@ def _train(args: argparse.Namespace) -> int:
     from learner.checkpoint import latest_checkpoint, load_checkpoint
 
     checkpoint = None
-    if args.resume:
+    if args.resume or args.resume_if_exists:
+        flag = "--resume" if args.resume else "--resume-if-exists"
         if args.run_dir is None:
-            raise UsageError("--resume needs --run-dir, the run to continue")
+            raise UsageError(f"{flag} needs --run-dir, the run to continue")
         path = latest_checkpoint(args.run_dir)
-        if path is None:
+        if path is None and args.resume:
             raise UsageError(f"--resume: no checkpoint in {args.run_dir / 'checkpoints'}")
-        checkpoint = load_checkpoint(path)
+        checkpoint = load_checkpoint(path) if path is not None else None
     try:
         config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
     except ValueError as error:

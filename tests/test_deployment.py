@@ -308,6 +308,12 @@ def test_learner_waits_for_a_healthy_teacher_and_head(services: dict[str, dict[s
         assert services[dependency]["healthcheck"]["test"]
 
 
+def test_a_restarted_learner_carries_on_and_a_finished_one_stays_down(services: dict[str, dict[str, Any]]) -> None:
+    learner = services["learner"]
+    assert parse_kuka_curriculum(command_of(learner, "kuka-curriculum", "train")).resume_if_exists
+    assert learner["restart"] == "on-failure", "a finished run exits 0; restarting it would loop"
+
+
 def test_tensorboard_reads_the_learner_run_directory(services: dict[str, dict[str, Any]], compose_volumes: set[str]) -> None:
     learner = services["learner"]
     train = parse_kuka_curriculum(command_of(learner, "kuka-curriculum", "train"))

@@ -48,3 +48,20 @@ def test_resume_needs_a_checkpoint_and_a_finished_run_is_not_overwritten(tmp_pat
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
     assert main(["train", "--run-dir", str(run_dir)]) == 2
     assert "pass --resume" in capsys.readouterr().err
+
+
+def test_resume_if_exists_starts_a_new_run_or_continues_an_existing_one(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    unreachable_ray = ["--ray-address", f"127.0.0.1:{free_port()}"]  # stops the run right after the run-dir checks
+    assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), *unreachable_ray]) == 2
+    assert "cannot reach Ray" in capsys.readouterr().err
+
+    config = TrainConfig(teacher="manual")
+    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
+    assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), *unreachable_ray]) == 2
+    assert "cannot reach Ray" in capsys.readouterr().err
+
+    with pytest.raises(SystemExit):
+        main(["train", "--resume", "--resume-if-exists", "--run-dir", str(run_dir)])
+    assert "not allowed with argument" in capsys.readouterr().err

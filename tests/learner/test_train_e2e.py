@@ -58,7 +58,7 @@ def wait_for(condition, timeout_s: float = TIMEOUT_S, what: str = "condition") -
 
 def test_train_logs_checkpoints_reports_every_episode_resumes_and_stops_on_ctrl_c(tmp_path, ray_cluster):
     run_dir = tmp_path / "e2e"
-    first = train(run_dir, ray_cluster, "--total-steps", "3000")
+    first = train(run_dir, ray_cluster, "--total-steps", "3000", "--resume-if-exists")  # nothing yet: a new run
 
     assert f"/curricula/{curriculum_name(run_dir)}" in first.stdout
     final = Path(first.stdout.strip().splitlines()[-1].removeprefix("final checkpoint:").strip())
