@@ -13,7 +13,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from playwright.sync_api import sync_playwright
+from playwright.sync_api import Browser, Playwright, sync_playwright
+
+DEBIAN_CHROMIUM = Path("/usr/bin/chromium")
 
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -28,6 +30,11 @@ CHROMIUM_ARGS = [
 traffic, which would only produce refused connections."""
 
 
+def launch_chromium(playwright: Playwright, executable: Path = DEBIAN_CHROMIUM) -> Browser:
+    """Headless Debian Chromium; Playwright's own browser downloads are never used."""
+    return playwright.chromium.launch(executable_path=str(executable), args=CHROMIUM_ARGS)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("url", help="a dashboard page, e.g. http://127.0.0.1:8000/curricula/NAME")
@@ -36,12 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, default=900, help="viewport height; the whole page is saved")
     parser.add_argument("--scale", type=float, default=1.0, help="device pixel ratio (2 for a sharper image)")
     parser.add_argument("--settle-s", type=float, default=3.0, help="extra wait after the first draw, for more polls")
-    parser.add_argument("--chromium", default="/usr/bin/chromium", help="Chromium executable")
+    parser.add_argument("--chromium", type=Path, default=DEBIAN_CHROMIUM, help="Chromium executable")
     args = parser.parse_args(argv)
 
     args.output.parent.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=args.chromium, args=CHROMIUM_ARGS)
+        browser = launch_chromium(playwright, args.chromium)
         page = browser.new_page(
             viewport={"width": args.width, "height": args.height}, device_scale_factor=args.scale
         )

@@ -8,10 +8,6 @@ read, work without one. The ALP-GMM page's screenshot is saved to ``test-artifac
 
 from __future__ import annotations
 
-import os
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -23,19 +19,11 @@ import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
 
+from bench.dashboard_screenshot import DEBIAN_CHROMIUM, launch_chromium
 from common.schemas import API_PREFIX, ParameterSpec
 from common.task_space import KUKA_TASK_SPACE
+from teacher_service.process import ServiceProcess
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
 WRITE_TOKEN = "dashboard-test-token"
@@ -44,73 +32,21 @@ FIT_RATE = 50
 EPISODES = 3 * FIT_RATE
 PAGE_TIMEOUT_MS = 20_000
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Debian's chromium (.ci/run installs it)")
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-@dataclass
-class TeacherService:
-    """``kuka-curriculum serve`` in a child process; ``stop`` then ``start`` is a restart on the
-    same port and database."""
-
-    db: Path
-    log: Path
-    port: int = field(default_factory=_free_port)
-    process: subprocess.Popen[bytes] | None = None
-
-    @property
-    def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
-
-    def start(self) -> None:
-        command = [sys.executable, "-m", "common.cli", "serve", "--port", str(self.port), "--db", str(self.db),
-                   "--log-level", "warning"]
-        with self.log.open("ab") as log:
-            self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
-                                            env={**os.environ, "KC_TEACHER_TOKEN": WRITE_TOKEN})
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                raise RuntimeError(f"the teacher service exited with {self.process.returncode}:\n{self.log.read_text()}")
-            try:
-                if httpx.get(f"{self.url}/healthz", timeout=1).status_code == 200:
-                    return
-            except httpx.TransportError:
-                time.sleep(0.2)
-        raise RuntimeError(f"the teacher service did not answer within 60 s:\n{self.log.read_text()}")
-
-    def stop(self) -> None:
-        if self.process is not None and self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        self.process = None
+pytestmark = pytest.mark.skipif(not DEBIAN_CHROMIUM.exists(), reason="needs Debian's chromium (.ci/run installs it)")
 
 
 @pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TeacherService]:
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServiceProcess]:
     """One service for the module; each test uses its own curriculum."""
     folder = tmp_path_factory.mktemp("teacher")
-    teacher = TeacherService(db=folder / "teacher.db", log=folder / "service.log")
-    teacher.start()
-    try:
+    with ServiceProcess(folder / "teacher.db", env={"KC_TEACHER_TOKEN": WRITE_TOKEN}) as teacher:
         yield teacher
-    finally:
-        teacher.stop()
 
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
     with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        chromium = launch_chromium(playwright)
         yield chromium
         chromium.close()
 
@@ -127,7 +63,7 @@ class PageProblems:
     foreign: list[str] = field(default_factory=list)
 
 
-def open_page(browser: Browser, url: str, service: TeacherService) -> tuple[Page, PageProblems]:
+def open_page(browser: Browser, url: str, service: ServiceProcess) -> tuple[Page, PageProblems]:
     page = browser.new_page(viewport={"width": 1400, "height": 900})
     page.set_default_timeout(PAGE_TIMEOUT_MS)
     problems = PageProblems()
@@ -142,13 +78,13 @@ def open_page(browser: Browser, url: str, service: TeacherService) -> tuple[Page
     return page, problems
 
 
-def create_curriculum(service: TeacherService, name: str, teacher: str, params: dict[str, Any]) -> None:
+def create_curriculum(service: ServiceProcess, name: str, teacher: str, params: dict[str, Any]) -> None:
     body = {"teacher": teacher, "space": SPACE, "params": params, "seed": 3}
     response = httpx.put(f"{service.url}{API_PREFIX}/curricula/{name}", json=body, headers=WRITES, timeout=10)
     assert response.status_code == 201, response.text
 
 
-def train(service: TeacherService, name: str, episodes: int, batch: int = FIT_RATE) -> list[dict[str, Any]]:
+def train(service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RATE) -> list[dict[str, Any]]:
     """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student."""
     rng = np.random.default_rng(7)
     played = []
@@ -171,7 +107,7 @@ def _difficulty(parameter: dict[str, Any], value: float) -> float:
     return (value - easy) / (hard - easy)
 
 
-def wait_for_fits(service: TeacherService, name: str) -> dict[str, Any]:
+def wait_for_fits(service: ServiceProcess, name: str) -> dict[str, Any]:
     """The curriculum's state once no fit is pending, so the next tasks come from the new model."""
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -220,7 +156,7 @@ def assert_ellipses_match(ellipses: list[dict[str, Any]], components: list[dict[
         np.testing.assert_allclose(mahalanobis_sq, 4.0, rtol=1e-6)
 
 
-def test_alp_gmm_dashboard_draws_the_posted_results_and_the_mixture(browser: Browser, service: TeacherService) -> None:
+def test_alp_gmm_dashboard_draws_the_posted_results_and_the_mixture(browser: Browser, service: ServiceProcess) -> None:
     create_curriculum(service, "kuka-alp", "alp-gmm", {"fit_rate": FIT_RATE, "max_components": 4})
     played = train(service, "kuka-alp", EPISODES)
     state = wait_for_fits(service, "kuka-alp")
@@ -271,7 +207,7 @@ def test_alp_gmm_dashboard_draws_the_posted_results_and_the_mixture(browser: Bro
     page.close()
 
 
-def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(browser: Browser, service: TeacherService) -> None:
+def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(browser: Browser, service: ServiceProcess) -> None:
     create_curriculum(service, "kuka-manual", "manual", {"min_episodes": 10, "window": 10})
     train(service, "kuka-manual", 20, batch=10)
     teacher = httpx.get(f"{service.url}{API_PREFIX}/curricula/kuka-manual/state", timeout=10).json()["teacher"]
@@ -295,7 +231,7 @@ def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(browser:
     page.close()
 
 
-def test_dashboard_survives_a_service_restart(browser: Browser, service: TeacherService) -> None:
+def test_dashboard_survives_a_service_restart(browser: Browser, service: ServiceProcess) -> None:
     create_curriculum(service, "kuka-restart", "random", {})
     train(service, "kuka-restart", FIT_RATE)
     page, problems = open_page(browser, f"{service.url}/curricula/kuka-restart", service)
