@@ -316,7 +316,13 @@ class Curriculum:
 
 
 def _rerun(job: FitJob, recorded: StoredFit) -> FitOutcome:
-    """Run a job again, keeping the live run's timing so the fit history survives restarts."""
+    """Run a job again, keeping the live run's timing so the fit history survives restarts.
+
+    A fit that failed live fails again here without running: had it succeeded on replay, the
+    rebuilt teacher would sample from a model the live one never had.
+    """
+    if recorded.error is not None:
+        return FitOutcome(job.index, None, recorded.error, recorded.started_at, recorded.finished_at)
     outcome = run_fit(job)
     return FitOutcome(outcome.index, outcome.output, outcome.error, recorded.started_at, recorded.finished_at)
 

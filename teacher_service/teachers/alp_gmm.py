@@ -236,8 +236,8 @@ class AlpGmmTeacher(Teacher):
     def install(self, fitted: MixtureFit) -> None:
         if not isinstance(fitted, MixtureFit):
             raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
-        if fitted.index != self.fits_installed:
-            raise ValueError(f"fit {fitted.index} arrived out of order: fit {self.fits_installed} is next")
+        if self._sampler is not None and fitted.index <= self._sampler.fit.index:
+            raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
         self._sampler = _Sampler.prepare(fitted)
         self.fits_installed += 1
 
@@ -264,7 +264,7 @@ class AlpGmmTeacher(Teacher):
             "bootstrapping": self._sampler is None,
             "fits": self.fits_installed,
             "fits_requested": self.fits_requested,
-            "last_fit_index": self.fits_installed - 1 if self.fits_installed else None,
+            "last_fit_index": self._sampler.fit.index if self._sampler else None,
             "next_fit_at_results": (self.results_seen // self.params.fit_rate + 1) * self.params.fit_rate,
             "recent_mean_alp": float(alps.mean()) if len(alps) else None,
             "components": self._components(),

@@ -42,7 +42,7 @@ class EpisodeResult:
 @dataclass(frozen=True)
 class FitJob:
     """A model fit that fell due. ``run()`` is pure and may run on any thread; pass its output to
-    ``Teacher.install``. Jobs must be installed in the order they were returned."""
+    ``Teacher.install``, in the order the jobs were returned; a failed one is simply left out."""
 
     index: int
     run: Callable[[], Any]

@@ -61,7 +61,7 @@ def test_first_fit_rate_tasks_are_uniform_and_the_first_fit_comes_due_after_them
     assert teacher.state()["recent_task_origins"].count("gmm") == origins["gmm"]
 
 
-def test_refits_fall_due_every_fit_rate_results_and_install_in_order() -> None:
+def test_refits_fall_due_every_fit_rate_results_and_a_failed_one_is_passed_over() -> None:
     teacher = alp_gmm(fit_rate=20, max_components=3)
     due_at, jobs = [], []
     rng = np.random.default_rng(0)
@@ -75,11 +75,11 @@ def test_refits_fall_due_every_fit_rate_results_and_install_in_order() -> None:
     assert teacher.state()["next_fit_at_results"] == 80
 
     fits = [job.run() for job in jobs]
-    with pytest.raises(ValueError, match="fit 1 arrived out of order: fit 0 is next"):
-        teacher.install(fits[1])
-    for fit in fits:
-        teacher.install(fit)
-    assert teacher.state()["fits"] == 3 and teacher.state()["last_fit_index"] == 2
+    teacher.install(fits[1])  # fit 0 failed: its successor still goes in
+    with pytest.raises(ValueError, match="fit 0 is stale: fit 1 is installed"):
+        teacher.install(fits[0])
+    teacher.install(fits[2])
+    assert teacher.state()["fits"] == 2 and teacher.state()["last_fit_index"] == 2
 
 
 def test_each_fit_sees_the_last_fit_rate_points() -> None:
