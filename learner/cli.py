@@ -106,13 +106,14 @@ def _train(args: argparse.Namespace) -> int:
 
     checkpoint = None
     if args.resume or args.resume_if_exists:
-        flag = "--resume" if args.resume else "--resume-if-exists"
         if args.run_dir is None:
+            flag = "--resume" if args.resume else "--resume-if-exists"
             raise UsageError(f"{flag} needs --run-dir, the run to continue")
         path = latest_checkpoint(args.run_dir)
-        if path is None and args.resume:
+        if path is not None:
+            checkpoint = load_checkpoint(path)
+        elif args.resume:
             raise UsageError(f"--resume: no checkpoint in {args.run_dir / 'checkpoints'}")
-        checkpoint = load_checkpoint(path) if path is not None else None
     try:
         config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
     except ValueError as error:

@@ -1,3 +1,5 @@
+"""pybullet's own C-level output stays out of the terminal; ours gets through."""
+
 import os
 
 import gymnasium
