@@ -65,3 +65,9 @@ def test_resume_if_exists_starts_a_new_run_or_continues_an_existing_one(tmp_path
     with pytest.raises(SystemExit):
         main(["train", "--resume", "--resume-if-exists", "--run-dir", str(run_dir)])
     assert "not allowed with argument" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flag", ["--resume", "--resume-if-exists"])
+def test_resuming_needs_the_run_directory(flag, capsys):
+    assert main(["train", flag]) == 2
+    assert f"{flag} needs --run-dir" in capsys.readouterr().err
