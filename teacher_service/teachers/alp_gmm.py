@@ -4,7 +4,9 @@ For each result, ALP is the absolute reward difference to the nearest earlier ta
 ``fit_rate`` results, Gaussian mixtures with k = min..max components are fitted to the last
 ``fit_rate`` points of (task, ALP) and the one with the lowest AIC is kept. A task then comes from
 a component picked in proportion to its mean ALP, or, with probability ``random_task_ratio``,
-uniformly from the box; before the first fit every task is uniform (the bootstrap).
+uniformly from the box; before the first fit every task is uniform (the bootstrap), or, with
+``bootstrap_spread`` set, drawn near the space's easiest task: the expert-knowledge variant that
+TeachMyAgent (Romac et al. 2021) benchmarks, for students that learn nothing from uniform tasks.
 
 Two changes from the reference code, each switchable: tasks are rescaled to [0, 1] per dimension
 before the nearest-neighbour search and the fit (in raw units a parameter spanning 0.04 next to
@@ -56,6 +58,9 @@ class AlpGmmParams:
     reward_range: list[float] | None = None
     """[low, high] mapped onto [0, 1] (clipped) before ALP is computed; null keeps raw rewards.
     ALP values in the state are in these normalised units when set."""
+    bootstrap_spread: float | None = None
+    """Null: bootstrap tasks are uniform. Otherwise they come from a Gaussian on the easiest task with
+    this standard deviation per dimension, in units of the dimension's width, clipped to the box."""
 
     def __post_init__(self) -> None:
         store(
@@ -68,6 +73,8 @@ class AlpGmmParams:
             buffer_size=as_int("buffer_size", self.buffer_size, minimum=1),
             rescale_tasks=as_bool("rescale_tasks", self.rescale_tasks),
             reward_range=as_range("reward_range", self.reward_range),
+            bootstrap_spread=(None if self.bootstrap_spread is None
+                              else as_float("bootstrap_spread", self.bootstrap_spread, low=0.0)),
         )
         if self.min_components > self.max_components:
             raise ValueError(
@@ -174,10 +181,15 @@ class _Sampler:
         """Task features from uniforms: ``choice`` (n,) picks components, ``normal_quantiles``
         (n, d) become standard normals by the inverse CDF, so each draw uses a fixed count."""
         component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
-        # Shift off 0 so the inverse normal CDF stays finite; a 2**-54 bias is immaterial.
-        normals = ndtri(normal_quantiles + 2.0**-54)
+        normals = _standard_normals(normal_quantiles)
         offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], normals)
         return self.task_means[component] + offsets
+
+
+def _standard_normals(uniforms: np.ndarray) -> np.ndarray:
+    """Inverse-CDF normals from uniforms in [0, 1); shifted off 0 so a drawn 0 stays finite (a 2**-54
+    bias is immaterial)."""
+    return ndtri(uniforms + 2.0**-54)
 
 
 class AlpGmmTeacher(Teacher):
@@ -188,6 +200,12 @@ class AlpGmmTeacher(Teacher):
     def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed)
         self.params = parse_params(self.kind, AlpGmmParams, params)
+        self._easiest_unit: np.ndarray | None = None
+        if self.params.bootstrap_spread is not None:
+            try:
+                self._easiest_unit = space.to_unit(space.to_array(space.easiest()))
+            except ValueError as error:
+                raise ValueError(f"bootstrap_spread needs an easiest value for every parameter: {error}") from None
         self._nearest = _NearestReward(len(space), self.params.buffer_size)
         self._fit_points: deque[np.ndarray] = deque(maxlen=self.params.fit_rate)
         self._sampler: _Sampler | None = None
@@ -200,13 +218,19 @@ class AlpGmmTeacher(Teacher):
         dims = len(self.space)
         # Per task: origin coin, component choice, d normal quantiles, d uniform coordinates.
         uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + 2 * dims)
+        normal_quantiles = uniforms[:, 2 : 2 + dims]
         tasks = self.space.from_unit(uniforms[:, 2 + dims :])
-        from_gmm = np.zeros(count, dtype=bool)
         if self._sampler is not None:
             from_gmm = uniforms[:, 0] >= self.params.random_task_ratio
-            features = self._sampler.draw(uniforms[:, 1], uniforms[:, 2 : 2 + dims])
+            features = self._sampler.draw(uniforms[:, 1], normal_quantiles)
             tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
-        origins = ["gmm" if gmm else "uniform" for gmm in from_gmm]
+            origins = ["gmm" if gmm else "uniform" for gmm in from_gmm]
+        elif self._easiest_unit is not None:
+            near_easiest = self._easiest_unit + self.params.bootstrap_spread * _standard_normals(normal_quantiles)
+            tasks = self.space.from_unit(np.clip(near_easiest, 0.0, 1.0))
+            origins = ["near-easiest"] * count
+        else:
+            origins = ["uniform"] * count
         self.origins.update(origins)
         self._recent_origins.extend(origins)
         return [self.space.from_array(row) for row in tasks]

@@ -415,9 +415,11 @@ function renderAlp(state) {
   if (!components.length) {
     empty.hidden = false;
     plot.hidden = true;
+    const bootstrapTasks =
+      state.curriculum.config.params.bootstrap_spread == null ? "uniform tasks" : "tasks near the easiest";
     empty.textContent =
       state.curriculum.config.teacher === "alp-gmm"
-        ? `Bootstrapping on uniform tasks; the first fit comes at ${formatNumber(state.teacher.next_fit_at_results)} results.`
+        ? `Bootstrapping on ${bootstrapTasks}; the first fit comes at ${formatNumber(state.teacher.next_fit_at_results)} results.`
         : `The ${state.curriculum.config.teacher} teacher fits no mixture.`;
     return;
   }

@@ -61,6 +61,32 @@ def test_first_fit_rate_tasks_are_uniform_and_the_first_fit_comes_due_after_them
     assert teacher.state()["recent_task_origins"].count("gmm") == origins["gmm"]
 
 
+def test_a_bootstrap_spread_keeps_bootstrap_tasks_near_the_easiest_until_the_first_fit() -> None:
+    teacher = alp_gmm(KUKA_TASK_SPACE, fit_rate=30, max_components=3, bootstrap_spread=0.1)
+    easiest = KUKA_TASK_SPACE.to_unit(KUKA_TASK_SPACE.to_array(KUKA_TASK_SPACE.easiest()))
+    bootstrap = [teacher.sample(1)[0] for _ in range(30)]
+    offsets = np.abs(KUKA_TASK_SPACE.to_unit(np.array([KUKA_TASK_SPACE.to_array(t) for t in bootstrap])) - easiest)
+    # Half-normal offsets of scale 0.1 (those pushed out of the box are clipped onto its edge).
+    assert offsets.mean() == pytest.approx(0.1 * np.sqrt(2 / np.pi) / 2, rel=0.3)
+    assert offsets.max() < 0.5 and offsets.std(axis=0).min() > 0
+    assert teacher.state()["task_origins"] == {"gmm": 0, "uniform": 0, "near-easiest": 30}
+
+    job = None
+    for task in bootstrap:
+        job = teacher.update(EpisodeResult(task, 0.0)) or job
+    teacher.install(job.run())
+    teacher.sample(1000)
+    origins = teacher.state()["task_origins"]
+    assert origins["near-easiest"] == 30, "after the first fit, the random share is uniform again"
+    assert origins["uniform"] == pytest.approx(0.2 * 1000, abs=40)
+
+
+def test_a_bootstrap_spread_needs_the_easiest_task() -> None:
+    no_anchors = TaskSpace([Parameter("x", 0.0, 1.0)])
+    with pytest.raises(ValueError, match="bootstrap_spread needs an easiest value"):
+        alp_gmm(no_anchors, bootstrap_spread=0.1)
+
+
 def test_refits_fall_due_every_fit_rate_results_and_a_failed_one_is_passed_over() -> None:
     teacher = alp_gmm(fit_rate=20, max_components=3)
     due_at, jobs = [], []

@@ -126,6 +126,8 @@ def test_unknown_kind_is_rejected_by_name() -> None:
         ("alp-gmm", {"reward_range": [1.0, 1.0]}, "reward_range must have low < high"),
         ("alp-gmm", {"reward_range": [0.0, "ten"]}, r"reward_range\[1\] must be a finite number"),
         ("alp-gmm", {"nb_em_init": True}, "nb_em_init must be an integer"),
+        ("alp-gmm", {"bootstrap_spread": -0.1}, "bootstrap_spread must lie in"),
+        ("alp-gmm", {"bootstrap_spread": "narrow"}, "bootstrap_spread must be a finite number"),
         ("manual", {"threshold": float("nan")}, "threshold must be a finite number"),
         ("manual", {"window": 10, "min_episodes": 20}, r"min_episodes \(20\) cannot exceed window"),
         ("manual", {"start": {"jp2": 0.5}}, "start: missing task parameter"),
