@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import tempfile
 import time
 from dataclasses import replace
@@ -39,6 +40,9 @@ from learner.teacher_process import local_teacher_service
 from learner.trainer import IterationReport, Trainer
 
 TEACHER = "fixed"
+MEASURED_STEPS_PER_ENV = 5120
+"""Every environment starts together and plays ~815-step episodes, each ending in a slow scripted
+grasp; a window of one episode per environment would hold too few or too many grasps."""
 
 
 @ray.remote(num_cpus=1)
@@ -79,13 +83,17 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="rollout actors, W (default 2)")
     parser.add_argument("--envs-per-worker", type=int, default=TrainConfig.envs_per_worker)
     parser.add_argument("--rollout-length", type=int, default=PPOConfig.rollout_length)
-    parser.add_argument("--iterations", type=int, default=10,
-                        help="measured training iterations; enough to span several episodes (default 10)")
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="measured training iterations (default: enough for each environment to play "
+                             f"{MEASURED_STEPS_PER_ENV} steps, several episodes)")
     parser.add_argument("--warmup-iterations", type=int, default=1, help="iterations left out (actor start-up)")
     parser.add_argument("--raw-seconds", type=float, default=30.0,
                         help="duration of the raw measurements, split before and after training (default 30)")
     parser.add_argument("--max-episode-steps", type=int, default=TrainConfig.max_episode_steps)
     args = parser.parse_args()
+    iterations = math.ceil(MEASURED_STEPS_PER_ENV / args.rollout_length) if args.iterations is None else args.iterations
+    if iterations < 1:
+        parser.error(f"--iterations must be at least 1, got {iterations}")
 
     config = TrainConfig(
         teacher=TEACHER,
@@ -96,7 +104,7 @@ def main() -> None:
         checkpoint_every=10**9,
         ppo=PPOConfig(rollout_length=args.rollout_length),
     )
-    config = replace(config, total_steps=config.batch_size * (args.iterations + args.warmup_iterations))
+    config = replace(config, total_steps=config.batch_size * (iterations + args.warmup_iterations))
 
     ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
     try:
@@ -117,7 +125,7 @@ def main() -> None:
     parallel = (parallel_before + parallel_after) / 2
     ideal = args.workers * raw
     print(f"W={args.workers} workers x {args.envs_per_worker} envs, batch {config.batch_size} steps, "
-          f"{args.iterations} measured iterations")
+          f"{iterations} measured iterations")
     print(f"raw environment rate, 1 process, random actions: {raw:8.0f} steps/s "
           f"(before {raw_before:.0f}, after {raw_after:.0f})")
     print(f"sampling phase, W workers, policy in the loop:  {sampling:8.0f} steps/s")
