@@ -3,7 +3,7 @@ VENV   := .venv
 PYTHON := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install train test bench clean
+.PHONY: install train check test bench clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PYTHON) || python3 -m venv $(VENV)
@@ -15,7 +15,13 @@ install: $(STAMP)
 train: $(STAMP)
 	$(VENV)/bin/kuka-curriculum train
 
-test: $(STAMP)
+# The code-health gates; configured in pyproject.toml, also run on commit by .pre-commit-config.yaml.
+check: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy
+
+test: check
 	$(VENV)/bin/pytest
 
 clean:
