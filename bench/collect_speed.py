@@ -83,12 +83,20 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="rollout actors, W (default 2)")
     parser.add_argument("--envs-per-worker", type=int, default=TrainConfig.envs_per_worker)
     parser.add_argument("--rollout-length", type=int, default=PPOConfig.rollout_length)
-    parser.add_argument("--iterations", type=int, default=None,
-                        help="measured training iterations (default: enough for each environment to play "
-                             f"{MEASURED_STEPS_PER_ENV} steps, several episodes)")
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="measured training iterations (default: enough for each environment to play "
+        f"{MEASURED_STEPS_PER_ENV} steps, several episodes)",
+    )
     parser.add_argument("--warmup-iterations", type=int, default=1, help="iterations left out (actor start-up)")
-    parser.add_argument("--raw-seconds", type=float, default=30.0,
-                        help="duration of the raw measurements, split before and after training (default 30)")
+    parser.add_argument(
+        "--raw-seconds",
+        type=float,
+        default=30.0,
+        help="duration of the raw measurements, split before and after training (default 30)",
+    )
     parser.add_argument("--max-episode-steps", type=int, default=TrainConfig.max_episode_steps)
     args = parser.parse_args()
     iterations = math.ceil(MEASURED_STEPS_PER_ENV / args.rollout_length) if args.iterations is None else args.iterations
@@ -111,27 +119,40 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as scratch, local_teacher_service(Path(scratch)) as teacher_url:
             half = args.raw_seconds / 2
             raw_before = ray.get(raw_env_rate.remote(half, args.max_episode_steps, seed=0))
-            parallel_before = sum(ray.get([raw_env_rate.remote(half, args.max_episode_steps, seed=2 + w)
-                                           for w in range(args.workers)]))
+            parallel_before = sum(
+                ray.get([raw_env_rate.remote(half, args.max_episode_steps, seed=2 + w) for w in range(args.workers)])
+            )
             run_dir = Path(scratch) / "collect-speed"
             sampling, whole = training_rates(config, run_dir, teacher_url, args.warmup_iterations)
             raw_after = ray.get(raw_env_rate.remote(half, args.max_episode_steps, seed=1))
-            parallel_after = sum(ray.get([raw_env_rate.remote(half, args.max_episode_steps, seed=2 + args.workers + w)
-                                          for w in range(args.workers)]))
+            parallel_after = sum(
+                ray.get(
+                    [
+                        raw_env_rate.remote(half, args.max_episode_steps, seed=2 + args.workers + w)
+                        for w in range(args.workers)
+                    ]
+                )
+            )
     finally:
         ray.shutdown()
 
     raw = (raw_before + raw_after) / 2
     parallel = (parallel_before + parallel_after) / 2
     ideal = args.workers * raw
-    print(f"W={args.workers} workers x {args.envs_per_worker} envs, batch {config.batch_size} steps, "
-          f"{iterations} measured iterations")
-    print(f"raw environment rate, 1 process, random actions: {raw:8.0f} steps/s "
-          f"(before {raw_before:.0f}, after {raw_after:.0f})")
+    print(
+        f"W={args.workers} workers x {args.envs_per_worker} envs, batch {config.batch_size} steps, "
+        f"{iterations} measured iterations"
+    )
+    print(
+        f"raw environment rate, 1 process, random actions: {raw:8.0f} steps/s "
+        f"(before {raw_before:.0f}, after {raw_after:.0f})"
+    )
     print(f"sampling phase, W workers, policy in the loop:  {sampling:8.0f} steps/s")
     print(f"ratio to W x raw ({ideal:.0f} steps/s):           {sampling / ideal:8.2f}")
-    print(f"W raw processes at once, random actions:         {parallel:8.0f} steps/s "
-          f"(before {parallel_before:.0f}, after {parallel_after:.0f})")
+    print(
+        f"W raw processes at once, random actions:         {parallel:8.0f} steps/s "
+        f"(before {parallel_before:.0f}, after {parallel_after:.0f})"
+    )
     print(f"ratio to W raw processes at once:                {sampling / parallel:8.2f}")
     print(f"whole iteration (sampling + update + broadcast): {whole:8.0f} steps/s")
 

@@ -49,9 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     args.output.parent.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as playwright:
         browser = launch_chromium(playwright, args.chromium)
-        page = browser.new_page(
-            viewport={"width": args.width, "height": args.height}, device_scale_factor=args.scale
-        )
+        page = browser.new_page(viewport={"width": args.width, "height": args.height}, device_scale_factor=args.scale)
         page.goto(args.url)
         page.wait_for_function("document.getElementById('updated').textContent !== ''", timeout=30_000)
         page.wait_for_timeout(args.settle_s * 1000)

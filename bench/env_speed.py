@@ -44,8 +44,7 @@ class SpeedReport:
             " (grasps included)",
             f"  mean plain step      : {1e6 * plain_s / max(self.steps - self.grasps, 1):8.1f} us"
             " (steps that did not grasp)",
-            f"  mean grasping step   : {1e3 * self.grasp_s / max(self.grasps, 1):8.2f} ms"
-            f" over {self.grasps} grasps",
+            f"  mean grasping step   : {1e3 * self.grasp_s / max(self.grasps, 1):8.2f} ms over {self.grasps} grasps",
             f"  successes            : {self.successes}/{self.finished} finished episodes",
         ]
 

@@ -63,8 +63,10 @@ class Connection:
 
     async def post(self, path: str, payload: object) -> object:
         body = json.dumps(payload).encode()
-        head = (f"POST {path} HTTP/1.1\r\nHost: {self._host}\r\nContent-Type: application/json\r\n"
-                f"Content-Length: {len(body)}\r\n\r\n").encode()
+        head = (
+            f"POST {path} HTTP/1.1\r\nHost: {self._host}\r\nContent-Type: application/json\r\n"
+            f"Content-Length: {len(body)}\r\n\r\n"
+        ).encode()
         self._writer.write(head + body)
         status_line, *header_lines = (await self._reader.readuntil(b"\r\n\r\n")).decode().split("\r\n")
         headers = dict(line.split(": ", 1) for line in header_lines if line)
@@ -84,8 +86,9 @@ def synthetic_reward(params: dict[str, float], rng: np.random.Generator) -> floa
     return 10.0 * (1.0 - difficulty) - 3.0 + float(rng.normal(0.0, 1.0))
 
 
-async def client_loop(host: str, port: int, seed: int, batch: int, started: float, warmup: float, stop: float,
-                      samples: list[Sample]) -> None:
+async def client_loop(
+    host: str, port: int, seed: int, batch: int, started: float, warmup: float, stop: float, samples: list[Sample]
+) -> None:
     rng = np.random.default_rng(seed)
     connection = await Connection.open(host, port)
     tasks_path = f"{API_PREFIX}/curricula/{CURRICULUM}/tasks"
@@ -163,8 +166,12 @@ async def drive(args: argparse.Namespace, port: int) -> list[Sample]:
     samples: list[Sample] = []
     started = time.perf_counter()
     stop = started + args.warmup + args.seconds
-    await asyncio.gather(*(client_loop("127.0.0.1", port, seed, args.batch, started, args.warmup, stop, samples)
-                           for seed in range(args.clients)))
+    await asyncio.gather(
+        *(
+            client_loop("127.0.0.1", port, seed, args.batch, started, args.warmup, stop, samples)
+            for seed in range(args.clients)
+        )
+    )
     return samples
 
 
@@ -174,27 +181,51 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=20.0, help="measured duration")
     parser.add_argument("--warmup", type=float, default=2.0, help="unmeasured lead-in")
     parser.add_argument("--fit-rate", type=int, default=500, help="ALP-GMM results between refits")
-    parser.add_argument("--batch", type=int, default=1,
-                        help="tasks drawn and results reported per request (1 = the issue's pattern; the "
-                             "TeacherClient prefetches 8)")
-    parser.add_argument("--teacher", default="alp-gmm", choices=["alp-gmm", "random"],
-                        help="random isolates the service's own cost from the teacher's")
+    parser.add_argument(
+        "--batch",
+        type=int,
+        default=1,
+        help="tasks drawn and results reported per request (1 = the issue's pattern; the TeacherClient prefetches 8)",
+    )
+    parser.add_argument(
+        "--teacher",
+        default="alp-gmm",
+        choices=["alp-gmm", "random"],
+        help="random isolates the service's own cost from the teacher's",
+    )
     args = parser.parse_args()
 
     port = free_port()
     url = f"http://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory() as scratch:
         server = subprocess.Popen(
-            [sys.executable, "-m", "common.cli", "serve", "--port", str(port), "--db", str(Path(scratch) / "load.db"),
-             "--log-level", "warning"],
+            [
+                sys.executable,
+                "-m",
+                "common.cli",
+                "serve",
+                "--port",
+                str(port),
+                "--db",
+                str(Path(scratch) / "load.db"),
+                "--log-level",
+                "warning",
+            ],
             cwd=Path(__file__).resolve().parents[1],
         )
         try:
             wait_healthy(url, server)
             space = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
-            http_json("PUT", f"{url}{API_PREFIX}/curricula/{CURRICULUM}",
-                      {"teacher": args.teacher, "space": space, "seed": 0,
-                       "params": {"fit_rate": args.fit_rate} if args.teacher == "alp-gmm" else {}})
+            http_json(
+                "PUT",
+                f"{url}{API_PREFIX}/curricula/{CURRICULUM}",
+                {
+                    "teacher": args.teacher,
+                    "space": space,
+                    "seed": 0,
+                    "params": {"fit_rate": args.fit_rate} if args.teacher == "alp-gmm" else {},
+                },
+            )
             service_cpu = cpu_seconds(server.pid)
             client_cpu = time.process_time()
             samples = asyncio.run(drive(args, port))
@@ -208,20 +239,29 @@ def main() -> int:
 
     run_start = min(s.started_at for s in samples)
     run_end = max(s.started_at + s.seconds for s in samples)
-    fits = [(fit["started_at"], fit["finished_at"]) for fit in state["fits"]  # type: ignore[index]
-            if fit["started_at"] < run_end and fit["finished_at"] > run_start]
+    fits = [
+        (fit["started_at"], fit["finished_at"])
+        for fit in state["fits"]  # type: ignore[index]
+        if fit["started_at"] < run_end and fit["finished_at"] > run_start
+    ]
     round_trips = sum(1 for sample in samples if sample.endpoint == "results")
     rate = round_trips / args.seconds
     episodes = round_trips * args.batch
-    print(f"teacher service under load: {args.clients} clients, {args.seconds:.0f} s measured, "
-          f"{args.teacher} over the KUKA space" + (f", fit_rate {args.fit_rate}" if args.teacher == "alp-gmm" else ""))
-    print(f"round trips: {round_trips} ({rate:.0f}/s), {args.batch} episode(s) each: "
-          f"{episodes / args.seconds:.0f} episodes/s")
+    print(
+        f"teacher service under load: {args.clients} clients, {args.seconds:.0f} s measured, "
+        f"{args.teacher} over the KUKA space" + (f", fit_rate {args.fit_rate}" if args.teacher == "alp-gmm" else "")
+    )
+    print(
+        f"round trips: {round_trips} ({rate:.0f}/s), {args.batch} episode(s) each: "
+        f"{episodes / args.seconds:.0f} episodes/s"
+    )
     measured = args.warmup + args.seconds
-    print(f"CPU per round trip: service {service_cpu / measured / rate * 1e3:.2f} ms, "
-          f"clients {client_cpu / measured / rate * 1e3:.2f} ms "
-          f"(service busy {service_cpu / measured:.0%} of a core, clients {client_cpu / measured:.0%}; "
-          f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f})")
+    print(
+        f"CPU per round trip: service {service_cpu / measured / rate * 1e3:.2f} ms, "
+        f"clients {client_cpu / measured / rate * 1e3:.2f} ms "
+        f"(service busy {service_cpu / measured:.0%} of a core, clients {client_cpu / measured:.0%}; "
+        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f})"
+    )
     print(f"{'endpoint':<10}{'p50 ms':>10}{'p99 ms':>10}")
     all_seconds = []
     for endpoint in ("tasks", "results"):
@@ -231,8 +271,10 @@ def main() -> int:
     in_refit = [s.seconds for s in samples if during_refit(s, fits)]
     outside = [s.seconds for s in samples if not during_refit(s, fits)]
     durations = [finish - start for start, finish in fits]
-    print(f"refits overlapping the run: {len(fits)} (mean {np.mean(durations) if durations else math.nan:.2f} s); "
-          f"{len(in_refit) / max(len(samples), 1):.0%} of requests overlapped one")
+    print(
+        f"refits overlapping the run: {len(fits)} (mean {np.mean(durations) if durations else math.nan:.2f} s); "
+        f"{len(in_refit) / max(len(samples), 1):.0%} of requests overlapped one"
+    )
     p99_all, p99_in, p99_out = (percentile_ms(x, 99) for x in (all_seconds, in_refit, outside))
     ratio = p99_in / p99_out
     print(f"p99 during refits {p99_in:.2f} ms, outside refits {p99_out:.2f} ms (ratio {ratio:.2f})")

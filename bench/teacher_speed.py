@@ -69,8 +69,7 @@ def main() -> None:
     print(f"ALP-GMM in {DIMS} dimensions, one BLAS thread, {args.repeats} teachers (median, max):")
     print(f"  refit on {FIT_RATE} points, k=2..10:  {statistics.median(refits):.3f} s, {max(refits):.3f} s")
     print(f"  sample {SAMPLES} tasks:            {statistics.median(samplings):.3f} s, {max(samplings):.3f} s")
-    print(f"  update with one result:         {1e6 * statistics.median(updates):.0f} us, "
-          f"{1e6 * max(updates):.0f} us")
+    print(f"  update with one result:         {1e6 * statistics.median(updates):.0f} us, {1e6 * max(updates):.0f} us")
 
 
 if __name__ == "__main__":

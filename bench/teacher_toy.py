@@ -128,8 +128,10 @@ def main() -> None:
 
     quarters = ", ".join(f"{args.episodes * q // QUARTERS}" for q in range(1, QUARTERS + 1))
     print(f"\n{args.episodes} episodes per run, seeds 0..{args.seeds - 1}; mastered cells after {quarters} episodes")
-    print(f"{'dims':>4} {'cells':>5} {'learnable':>9}  {'teacher':<8} {'mastered (mean)':<24} "
-          f"{'final mean ± sd':>15}  {'final per seed':<24} {'progress share':>14} {'s/run':>6}")
+    print(
+        f"{'dims':>4} {'cells':>5} {'learnable':>9}  {'teacher':<8} {'mastered (mean)':<24} "
+        f"{'final mean ± sd':>15}  {'final per seed':<24} {'progress share':>14} {'s/run':>6}"
+    )
     for dims, bins in WORLDS.items():
         learnable = int(ToyStudent(dims, bins, 0).learnable.sum())
         for kind in ("alp-gmm", "random"):
@@ -143,6 +145,7 @@ def main() -> None:
                 f"{statistics.fmean(r.progress_share for r in results):>14.2f} "
                 f"{statistics.fmean(r.seconds for r in results):>6.1f}"
             )
+
 
 if __name__ == "__main__":
     main()

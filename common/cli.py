@@ -17,7 +17,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("teacher_service.cli", "Run the teacher service: curricula over HTTP, persisted in SQLite."),
     "evaluate": ("learner.evaluate", "Evaluate a checkpoint's deterministic policy, with 95% confidence intervals."),
     "render": ("learner.render", "Write a GIF or MP4 of a checkpoint's policy at work."),
-    "bakeoff": ("learner.bakeoff", "Train and evaluate every teacher over several seeds; write a results table and curves."),
+    "bakeoff": (
+        "learner.bakeoff",
+        "Train and evaluate every teacher over several seeds; write a results table and curves.",
+    ),
 }
 
 

@@ -23,8 +23,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/demo.gif"), help="where to write the GIF")
     parser.add_argument("--steps", type=int, default=800, help="environment steps to film (one frame per 8)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the block placement and the actions")
-    parser.add_argument("--task", choices=("hardest", "easiest"), default="hardest",
-                        help="curriculum anchor to film; 'easiest' usually ends in a grasp within 100 steps")
+    parser.add_argument(
+        "--task",
+        choices=("hardest", "easiest"),
+        default="hardest",
+        help="curriculum anchor to film; 'easiest' usually ends in a grasp within 100 steps",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,8 +26,20 @@ FINGER_TIP_JOINTS = (10, 13)
 
 BASE_POSITION = (-0.1, 0.0, 0.07)
 DEFAULT_START_POSE: tuple[float, ...] = (
-    0.006418, 0.413184, -0.011401, -1.589317, 0.005379, 1.137684, -0.006539,
-    0.000048, -0.299912, 0.0, -0.000043, 0.299960, 0.0, -0.000200,
+    0.006418,
+    0.413184,
+    -0.011401,
+    -1.589317,
+    0.005379,
+    1.137684,
+    -0.006539,
+    0.000048,
+    -0.299912,
+    0.0,
+    -0.000043,
+    0.299960,
+    0.0,
+    -0.000200,
 )
 
 TARGET_X_RANGE = (0.50, 0.65)
@@ -77,8 +89,9 @@ class KukaArm:
             # A motor keeps its velocity limit, so it is set here once: the array call that
             # updates the targets every step cannot set it.
             limit = {"maxVelocity": ARM_MAX_VELOCITY} if joint < ARM_JOINTS else {}
-            client.setJointMotorControl2(self.uid, joint, pybullet.POSITION_CONTROL, targetPosition=position,
-                                         force=ARM_FORCE, **limit)
+            client.setJointMotorControl2(
+                self.uid, joint, pybullet.POSITION_CONTROL, targetPosition=position, force=ARM_FORCE, **limit
+            )
         # IK solves for the link frame (state[4]), not the centre of mass (state[0]).
         self.target = list(client.getLinkState(self.uid, END_EFFECTOR_LINK, computeForwardKinematics=1)[4])
         self.wrist_yaw = 0.0
@@ -95,14 +108,21 @@ class KukaArm:
             self.uid, END_EFFECTOR_LINK, target, GRIPPER_POINTING_DOWN, jointDamping=IK_JOINT_DAMPING
         )
         self._set_motors(
-            self.uid, ARM_AND_WRIST_JOINTS, pybullet.POSITION_CONTROL,
+            self.uid,
+            ARM_AND_WRIST_JOINTS,
+            pybullet.POSITION_CONTROL,
             targetPositions=(*joint_poses[:ARM_JOINTS], self.wrist_yaw),
-            targetVelocities=ARM_AND_WRIST_VELOCITIES, forces=ARM_AND_WRIST_FORCES,
-            positionGains=ARM_AND_WRIST_POSITION_GAINS, velocityGains=ARM_AND_WRIST_VELOCITY_GAINS,
+            targetVelocities=ARM_AND_WRIST_VELOCITIES,
+            forces=ARM_AND_WRIST_FORCES,
+            positionGains=ARM_AND_WRIST_POSITION_GAINS,
+            velocityGains=ARM_AND_WRIST_VELOCITY_GAINS,
         )
         if finger_opening != self._finger_opening:  # a motor keeps its command, so resend only changes
             self._finger_opening = finger_opening
             self._set_motors(
-                self.uid, FINGER_JOINTS, pybullet.POSITION_CONTROL,
-                targetPositions=(-finger_opening, finger_opening, 0.0, 0.0), forces=FINGER_FORCES,
+                self.uid,
+                FINGER_JOINTS,
+                pybullet.POSITION_CONTROL,
+                targetPositions=(-finger_opening, finger_opening, 0.0, 0.0),
+                forces=FINGER_FORCES,
             )

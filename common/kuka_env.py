@@ -176,15 +176,23 @@ class KukaGraspEnv(gymnasium.Env):
             return None
         client = self._client
         view = client.computeViewMatrixFromYawPitchRoll(
-            cameraTargetPosition=CAMERA_TARGET, distance=CAMERA_DISTANCE,
-            yaw=CAMERA_YAW, pitch=CAMERA_PITCH, roll=0.0, upAxisIndex=2,
+            cameraTargetPosition=CAMERA_TARGET,
+            distance=CAMERA_DISTANCE,
+            yaw=CAMERA_YAW,
+            pitch=CAMERA_PITCH,
+            roll=0.0,
+            upAxisIndex=2,
         )
         projection = client.computeProjectionMatrixFOV(
             fov=60.0, aspect=self.render_width / self.render_height, nearVal=0.05, farVal=10.0
         )
         _, _, pixels, _, _ = client.getCameraImage(
-            self.render_width, self.render_height, view, projection,
-            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            self.render_width,
+            self.render_height,
+            view,
+            projection,
+            renderer=pybullet.ER_TINY_RENDERER,
+            flags=pybullet.ER_NO_SEGMENTATION_MASK,
         )
         return np.asarray(pixels, dtype=np.uint8).reshape(self.render_height, self.render_width, 4)[:, :, :3]
 

@@ -34,8 +34,9 @@ class PolicySpec:
         if len(set(self.angle_indices)) != len(self.angle_indices) or not all(
             0 <= index < self.obs_dim for index in self.angle_indices
         ):
-            raise ValueError(f"angle_indices must be distinct observation indices below {self.obs_dim}, "
-                             f"got {self.angle_indices}")
+            raise ValueError(
+                f"angle_indices must be distinct observation indices below {self.obs_dim}, got {self.angle_indices}"
+            )
 
     @property
     def feature_dim(self) -> int:
@@ -150,8 +151,10 @@ class InferencePolicy:
         actor = [(weights[f"actor_mean.{2 * i}.weight"], weights[f"actor_mean.{2 * i}.bias"]) for i in range(depth)]
         critic = [(weights[f"critic.{2 * i}.weight"], weights[f"critic.{2 * i}.bias"]) for i in range(depth)]
         fused = [(np.concatenate([actor[0][0], critic[0][0]]), np.concatenate([actor[0][1], critic[0][1]]))]
-        fused += [(_block_diagonal(a_weight, c_weight), np.concatenate([a_bias, c_bias]))
-                  for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:])]
+        fused += [
+            (_block_diagonal(a_weight, c_weight), np.concatenate([a_bias, c_bias]))
+            for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:])
+        ]
         # Stored as (in, out) so a layer is one ``x @ w + b``.
         self._layers = [(np.ascontiguousarray(w.T, dtype=np.float32), b.astype(np.float32)) for w, b in fused]
         log_std = weights["actor_log_std"].astype(np.float64)

@@ -44,8 +44,13 @@ class ParameterSpec(_Request):
 
     @classmethod
     def from_parameter(cls, parameter: Parameter) -> ParameterSpec:
-        return cls(name=parameter.name, low=parameter.low, high=parameter.high,
-                   hardest=parameter.hardest, easiest=parameter.easiest)
+        return cls(
+            name=parameter.name,
+            low=parameter.low,
+            high=parameter.high,
+            hardest=parameter.hardest,
+            easiest=parameter.easiest,
+        )
 
 
 class CurriculumSpec(_Request):

@@ -170,8 +170,10 @@ class TeacherClient:
     ) -> CurriculumInfo:
         """Create the curriculum, or confirm the identical one exists (a restart can call this again)."""
         spec = CurriculumSpec(
-            teacher=teacher, space=[ParameterSpec.from_parameter(p) for p in space.parameters],
-            params=dict(params or {}), seed=seed,
+            teacher=teacher,
+            space=[ParameterSpec.from_parameter(p) for p in space.parameters],
+            params=dict(params or {}),
+            seed=seed,
         )
         answer = self._call("PUT", self._path, spec.model_dump(mode="json"), deadline=time.monotonic() + timeout)
         return CurriculumInfo.model_validate(answer)
@@ -200,8 +202,9 @@ class TeacherClient:
     def _refill(self) -> None:
         patience = 0.0 if self._offline else self.task_timeout
         try:
-            answer = self._call("POST", f"{self._path}/tasks", {"count": self.prefetch},
-                                deadline=time.monotonic() + patience)
+            answer = self._call(
+                "POST", f"{self._path}/tasks", {"count": self.prefetch}, deadline=time.monotonic() + patience
+            )
         except TeacherUnavailable as error:
             if not self._offline:
                 log.warning("teacher unreachable; running offline episodes until it answers: %s", error)

@@ -90,8 +90,11 @@ class Run:
 
 
 def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
-    return [Run(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
-            for teacher in teachers for seed in range(seeds)]
+    return [
+        Run(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
+        for teacher in teachers
+        for seed in range(seeds)
+    ]
 
 
 def check_settings(out: Path, settings: dict[str, Any]) -> None:
@@ -103,22 +106,41 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
     path = Path(out) / SETTINGS_FILE
     if path.exists():
         stored = json.loads(path.read_text(encoding="utf-8"))
-        differences = [f"{name}: {stored.get(name)!r} before, {value!r} now"
-                       for name, value in settings.items() if name != "total_steps" and stored.get(name) != value]
+        differences = [
+            f"{name}: {stored.get(name)!r} before, {value!r} now"
+            for name, value in settings.items()
+            if name != "total_steps" and stored.get(name) != value
+        ]
         if differences:
-            raise UsageError(f"{out} holds a bake-off with other training settings ({'; '.join(differences)}); "
-                             "use the same flags or another --out")
+            raise UsageError(
+                f"{out} holds a bake-off with other training settings ({'; '.join(differences)}); "
+                "use the same flags or another --out"
+            )
         if settings["total_steps"] < stored["total_steps"]:
-            raise UsageError(f"{out} holds runs trained for {stored['total_steps']:_} steps; "
-                             f"--total-steps {settings['total_steps']:_} would compare them with shorter ones")
+            raise UsageError(
+                f"{out} holds runs trained for {stored['total_steps']:_} steps; "
+                f"--total-steps {settings['total_steps']:_} would compare them with shorter ones"
+            )
     write_json(path, settings)
 
 
 def train_command(
     run: Run, total_steps: int, settings: dict[str, Any], resume: bool, ray_address: str | None
 ) -> list[str]:
-    command = [sys.executable, "-m", "common.cli", "train", "--teacher", run.teacher, "--seed", str(run.seed),
-               "--total-steps", str(total_steps), "--run-dir", str(run.directory)]
+    command = [
+        sys.executable,
+        "-m",
+        "common.cli",
+        "train",
+        "--teacher",
+        run.teacher,
+        "--seed",
+        str(run.seed),
+        "--total-steps",
+        str(total_steps),
+        "--run-dir",
+        str(run.directory),
+    ]
     for name, flag in TRAINING_FLAGS.items():
         command += [flag, str(settings[name])]
     if ray_address is not None:
@@ -201,8 +223,11 @@ def learning_curve(run: Run) -> dict[int, float]:
     An interrupted run repeats the iterations after its last checkpoint, so a step logged twice
     keeps its latest record.
     """
-    return {int(record["step"]): float(record["eval/return"])
-            for record in _metrics_records(run) if record.get("eval/return") is not None}
+    return {
+        int(record["step"]): float(record["eval/return"])
+        for record in _metrics_records(run)
+        if record.get("eval/return") is not None
+    }
 
 
 @dataclass(frozen=True)
@@ -233,8 +258,13 @@ class TeacherResult:
             "success_rate": self.success_rate.to_dict(),
             "book_return": BOOK_RETURNS.get(self.teacher),
             "runs": [
-                {"seed": run.seed, "run_dir": str(run.directory), "return": result.returns.estimate,
-                 "success_rate": result.success_rate.estimate, "mean_length": result.mean_length}
+                {
+                    "seed": run.seed,
+                    "run_dir": str(run.directory),
+                    "return": result.returns.estimate,
+                    "success_rate": result.success_rate.estimate,
+                    "mean_length": result.mean_length,
+                }
                 for run, result in zip(self.runs, self.evaluations)
             ],
         }
@@ -246,8 +276,9 @@ def _format_return(interval: Interval) -> str:
 
 
 def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int) -> str:
-    trained = ", ".join(f"{name.replace('_', ' ')} {value}"
-                        for name, value in settings.items() if name != "total_steps")
+    trained = ", ".join(
+        f"{name.replace('_', ' ')} {value}" for name, value in settings.items() if name != "total_steps"
+    )
     seeds = max(len(result.runs) for result in results)
     lines = [
         "# Teacher bake-off on the hardest task",
@@ -298,15 +329,21 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
             continue
         values = np.array([[curve[step] for step in common_steps] for curve in curves])
         label = f"{TEACHER_LABELS[result.teacher]} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
-        line, = axes.plot(common_steps, values.mean(axis=0), label=label)
+        (line,) = axes.plot(common_steps, values.mean(axis=0), label=label)
         if len(curves) > 1:
             axes.fill_between(common_steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.2)
         plotted = True
     if plotted:
         axes.legend(loc="best")
     else:
-        axes.text(0.5, 0.5, "no evaluations were logged during training (--curve-every 0?)",
-                  ha="center", va="center", transform=axes.transAxes)
+        axes.text(
+            0.5,
+            0.5,
+            "no evaluations were logged during training (--curve-every 0?)",
+            ha="center",
+            va="center",
+            transform=axes.transAxes,
+        )
     axes.set_xlabel("environment steps")
     axes.set_ylabel("mean return on the hardest task")
     axes.set_title("Hardest-task evaluation during training (band: worst to best seed)")
@@ -317,47 +354,92 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
 def write_reports(
     out: Path, results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int
 ) -> None:
-    write_json(out / RESULTS_JSON, {
-        "settings": settings,
-        "evaluation": {"task": KUKA_TASK_SPACE.hardest(), "episodes": episodes, "seed": seed, "confidence": CONFIDENCE},
-        "teachers": [result.to_dict() for result in results],
-    })
+    write_json(
+        out / RESULTS_JSON,
+        {
+            "settings": settings,
+            "evaluation": {
+                "task": KUKA_TASK_SPACE.hardest(),
+                "episodes": episodes,
+                "seed": seed,
+                "confidence": CONFIDENCE,
+            },
+            "teachers": [result.to_dict() for result in results],
+        },
+    )
     (out / RESULTS_MARKDOWN).write_text(results_markdown(results, settings, episodes, seed), encoding="utf-8")
     plot_learning_curves(out / LEARNING_CURVES, results)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     defaults = TrainConfig()
-    parser.add_argument("--teachers", nargs="+", choices=DEFAULT_TEACHERS, default=list(DEFAULT_TEACHERS),
-                        metavar="TEACHER", help=f"teachers to compare (default: {' '.join(DEFAULT_TEACHERS)})")
+    parser.add_argument(
+        "--teachers",
+        nargs="+",
+        choices=DEFAULT_TEACHERS,
+        default=list(DEFAULT_TEACHERS),
+        metavar="TEACHER",
+        help=f"teachers to compare (default: {' '.join(DEFAULT_TEACHERS)})",
+    )
     parser.add_argument("--seeds", type=positive_int, default=3, help="seeds per teacher: 0, 1, ... (default 3)")
-    parser.add_argument("--total-steps", type=positive_int, default=defaults.total_steps,
-                        help=f"environment steps per run (default {defaults.total_steps:_})")
-    parser.add_argument("--out", type=Path, default=Path("runs/bakeoff"),
-                        help="bake-off directory (default runs/bakeoff)")
+    parser.add_argument(
+        "--total-steps",
+        type=positive_int,
+        default=defaults.total_steps,
+        help=f"environment steps per run (default {defaults.total_steps:_})",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("runs/bakeoff"), help="bake-off directory (default runs/bakeoff)"
+    )
     evaluation = parser.add_argument_group("final evaluation (hardest task)")
-    evaluation.add_argument("--eval-episodes", type=positive_int, default=100,
-                            help="episodes per final policy (default 100)")
+    evaluation.add_argument(
+        "--eval-episodes", type=positive_int, default=100, help="episodes per final policy (default 100)"
+    )
     evaluation.add_argument("--eval-seed", type=int, default=0, help="episode i is seeded eval-seed + i (default 0)")
     evaluation.add_argument("--eval-processes", type=positive_int, help="evaluation processes (default: one per CPU)")
     training = parser.add_argument_group("training, the same for every run")
-    training.add_argument("--workers", type=positive_int, default=defaults.workers,
-                          help=f"rollout actors (default {defaults.workers})")
-    training.add_argument("--envs-per-worker", type=positive_int, default=defaults.envs_per_worker,
-                          help=f"environments per actor (default {defaults.envs_per_worker})")
-    training.add_argument("--rollout-length", type=positive_int, default=defaults.ppo.rollout_length,
-                          help=f"steps per environment per iteration (default {defaults.ppo.rollout_length})")
-    training.add_argument("--max-episode-steps", type=positive_int, default=defaults.max_episode_steps,
-                          help=f"episode step limit (default {defaults.max_episode_steps})")
-    training.add_argument("--checkpoint-every", type=positive_int, default=defaults.checkpoint_every,
-                          help=f"iterations between checkpoints (default {defaults.checkpoint_every})")
-    training.add_argument("--curve-every", type=int_at_least(0), default=defaults.eval_every,
-                          help="iterations between learning-curve evaluations, 0 for none "
-                               f"(default {defaults.eval_every})")
-    training.add_argument("--curve-episodes", type=positive_int, default=defaults.eval_episodes,
-                          help=f"episodes per learning-curve evaluation (default {defaults.eval_episodes})")
-    training.add_argument("--ray-address",
-                          help="a running Ray cluster for the runs (default: each run starts a local one)")
+    training.add_argument(
+        "--workers", type=positive_int, default=defaults.workers, help=f"rollout actors (default {defaults.workers})"
+    )
+    training.add_argument(
+        "--envs-per-worker",
+        type=positive_int,
+        default=defaults.envs_per_worker,
+        help=f"environments per actor (default {defaults.envs_per_worker})",
+    )
+    training.add_argument(
+        "--rollout-length",
+        type=positive_int,
+        default=defaults.ppo.rollout_length,
+        help=f"steps per environment per iteration (default {defaults.ppo.rollout_length})",
+    )
+    training.add_argument(
+        "--max-episode-steps",
+        type=positive_int,
+        default=defaults.max_episode_steps,
+        help=f"episode step limit (default {defaults.max_episode_steps})",
+    )
+    training.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        default=defaults.checkpoint_every,
+        help=f"iterations between checkpoints (default {defaults.checkpoint_every})",
+    )
+    training.add_argument(
+        "--curve-every",
+        type=int_at_least(0),
+        default=defaults.eval_every,
+        help=f"iterations between learning-curve evaluations, 0 for none (default {defaults.eval_every})",
+    )
+    training.add_argument(
+        "--curve-episodes",
+        type=positive_int,
+        default=defaults.eval_episodes,
+        help=f"episodes per learning-curve evaluation (default {defaults.eval_episodes})",
+    )
+    training.add_argument(
+        "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -391,8 +473,10 @@ def _bakeoff(args: argparse.Namespace) -> int:
                 (run.directory / EVALUATION_FILE).unlink(missing_ok=True)
             else:
                 _clear_unfinished_start(run)
-            progress.write(f"{run.name}: {'resuming at ' + format(done[run.name], '_') if resume else 'training'} "
-                           f"(log: {run.directory / TRAIN_LOG})")
+            progress.write(
+                f"{run.name}: {'resuming at ' + format(done[run.name], '_') if resume else 'training'} "
+                f"(log: {run.directory / TRAIN_LOG})"
+            )
             command = train_command(run, args.total_steps, settings, resume, args.ray_address)
             finished = train_run(run, command, progress, steps_before) and run.steps_done() >= args.total_steps
             if not finished:

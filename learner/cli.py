@@ -40,39 +40,66 @@ class UsageError(Exception):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     run = parser.add_argument_group("run")
     run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
-    run.add_argument("--total-steps", type=positive_int,
-                     help=f"environment steps to train for (default {DEFAULTS.total_steps:_})")
+    run.add_argument(
+        "--total-steps", type=positive_int, help=f"environment steps to train for (default {DEFAULTS.total_steps:_})"
+    )
     run.add_argument("--workers", type=positive_int, help=f"rollout actors (default {DEFAULTS.workers})")
-    run.add_argument("--envs-per-worker", type=positive_int,
-                     help=f"environments per actor (default {DEFAULTS.envs_per_worker})")
-    run.add_argument("--rollout-length", type=positive_int,
-                     help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})")
-    run.add_argument("--max-episode-steps", type=positive_int,
-                     help=f"episode step limit (default {DEFAULTS.max_episode_steps})")
-    run.add_argument("--seed", type=int,
-                     help=f"seed for the network, environments and teacher (default {DEFAULTS.seed})")
-    run.add_argument("--checkpoint-every", type=positive_int,
-                     help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})")
-    run.add_argument("--eval-every", type=non_negative_int,
-                     help="iterations between evaluations on the hardest task, 0 for none "
-                          f"(default {DEFAULTS.eval_every})")
-    run.add_argument("--eval-episodes", type=positive_int,
-                     help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})")
+    run.add_argument(
+        "--envs-per-worker", type=positive_int, help=f"environments per actor (default {DEFAULTS.envs_per_worker})"
+    )
+    run.add_argument(
+        "--rollout-length",
+        type=positive_int,
+        help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})",
+    )
+    run.add_argument(
+        "--max-episode-steps", type=positive_int, help=f"episode step limit (default {DEFAULTS.max_episode_steps})"
+    )
+    run.add_argument(
+        "--seed", type=int, help=f"seed for the network, environments and teacher (default {DEFAULTS.seed})"
+    )
+    run.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})",
+    )
+    run.add_argument(
+        "--eval-every",
+        type=non_negative_int,
+        help=f"iterations between evaluations on the hardest task, 0 for none (default {DEFAULTS.eval_every})",
+    )
+    run.add_argument(
+        "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
+    )
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
     resume = where.add_mutually_exclusive_group()
-    resume.add_argument("--resume", action="store_true",
-                        help="continue the run in --run-dir from its latest checkpoint; "
-                             "flags given override its saved settings")
-    resume.add_argument("--resume-if-exists", action="store_true",
-                        help="like --resume when --run-dir holds a checkpoint, else start the run there "
-                             "(for a supervisor that restarts the learner, such as Docker Compose)")
+    resume.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --run-dir from its latest checkpoint; flags given override its saved settings",
+    )
+    resume.add_argument(
+        "--resume-if-exists",
+        action="store_true",
+        help="like --resume when --run-dir holds a checkpoint, else start the run there "
+        "(for a supervisor that restarts the learner, such as Docker Compose)",
+    )
     where.add_argument("--teacher-url", help="a running teacher service (default: start one for this run)")
     where.add_argument("--ray-address", help="a running Ray cluster, host:port (default: start a local one)")
 
 
-_RUN_SETTINGS = ("teacher", "total_steps", "workers", "envs_per_worker", "max_episode_steps", "seed",
-                 "checkpoint_every", "eval_every", "eval_episodes")
+_RUN_SETTINGS = (
+    "teacher",
+    "total_steps",
+    "workers",
+    "envs_per_worker",
+    "max_episode_steps",
+    "seed",
+    "checkpoint_every",
+    "eval_every",
+    "eval_episodes",
+)
 """``TrainConfig`` fields settable by the flag of the same name."""
 
 
@@ -96,8 +123,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"kuka-curriculum train: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("kuka-curriculum train: stopped at once; the run resumes from its last periodic checkpoint",
-              file=sys.stderr)
+        print(
+            "kuka-curriculum train: stopped at once; the run resumes from its last periodic checkpoint", file=sys.stderr
+        )
         return 130
 
 
@@ -148,8 +176,10 @@ def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str
     try:
         httpx.get(f"{url}/healthz", timeout=TEACHER_CONNECT_TIMEOUT_S).raise_for_status()
     except httpx.HTTPError as error:
-        raise UsageError(f"cannot reach the teacher service at {url} ({error}); start it with "
-                         "`kuka-curriculum serve` or leave out --teacher-url to start one") from None
+        raise UsageError(
+            f"cannot reach the teacher service at {url} ({error}); start it with "
+            "`kuka-curriculum serve` or leave out --teacher-url to start one"
+        ) from None
     return url
 
 
@@ -159,8 +189,13 @@ def _register_curriculum(url: str, name: str, config: TrainConfig, token: str | 
 
     with TeacherClient(url, name, token=token) as client:
         try:
-            client.register(config.teacher, KUKA_TASK_SPACE, params=config.teacher_params, seed=config.seed,
-                            timeout=TEACHER_CONNECT_TIMEOUT_S)
+            client.register(
+                config.teacher,
+                KUKA_TASK_SPACE,
+                params=config.teacher_params,
+                seed=config.seed,
+                timeout=TEACHER_CONNECT_TIMEOUT_S,
+            )
         except TeacherClientError as error:
             raise UsageError(f"cannot register curriculum {name!r} at {url}: {error}") from None
 
@@ -171,8 +206,10 @@ def _check_reachable(ray_address: str) -> None:
     try:
         socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
     except (OSError, ValueError) as error:
-        raise UsageError(f"cannot reach Ray at {ray_address!r} ({error}); expected host:port of a running "
-                         "cluster, or leave out --ray-address to start a local one") from None
+        raise UsageError(
+            f"cannot reach Ray at {ray_address!r} ({error}); expected host:port of a running "
+            "cluster, or leave out --ray-address to start a local one"
+        ) from None
 
 
 def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack) -> None:
@@ -199,8 +236,9 @@ def _run_training(
     from common.teacher_client import TeacherClient
     from learner.trainer import IterationReport, Trainer
 
-    trainer = Trainer(config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint,
-                      actor_name_prefix=name)
+    trainer = Trainer(
+        config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint, actor_name_prefix=name
+    )
     print(f"run directory: {run_dir}")
     print(f"dashboard:     {teacher_url}/curricula/{name}")
     start = trainer.counters.steps
@@ -221,9 +259,12 @@ def _run_training(
             refresh=False,
         )
 
-    with TeacherClient(teacher_url, name, token=token, request_timeout=STATUS_TIMEOUT_S) as status, tqdm(
-        total=config.total_steps, initial=start, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1
-    ) as progress:
+    with (
+        TeacherClient(teacher_url, name, token=token, request_timeout=STATUS_TIMEOUT_S) as status,
+        tqdm(
+            total=config.total_steps, initial=start, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1
+        ) as progress,
+    ):
         previous = {signum: signal.signal(signum, on_stop_signal) for signum in STOP_SIGNALS}
         try:
             final = trainer.run(on_iteration)

@@ -36,8 +36,10 @@ from learner.ppo import PPOLearner
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 
-TASK_HELP = ("'hardest' (the book's evaluation setting), 'easiest', or name=value overrides on the hardest task, "
-             "e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to override the easiest one)")
+TASK_HELP = (
+    "'hardest' (the book's evaluation setting), 'easiest', or name=value overrides on the hardest task, "
+    "e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to override the easiest one)"
+)
 
 
 class UsageError(Exception):
@@ -81,8 +83,10 @@ def task_argument(text: str) -> Task:
 def describe_task(task: Task) -> str:
     """'hardest task', or the nearer anchor and what differs from it: 'easiest task with jp2=1'."""
     anchors = {name: getattr(KUKA_TASK_SPACE, name)() for name in ("hardest", "easiest")}
-    changes = {name: [f"{key}={value:g}" for key, value in task.items() if value != anchor[key]]
-               for name, anchor in anchors.items()}
+    changes = {
+        name: [f"{key}={value:g}" for key, value in task.items() if value != anchor[key]]
+        for name, anchor in anchors.items()
+    }
     nearest = min(changes, key=lambda name: len(changes[name]))
     return f"{nearest} task" + (f" with {', '.join(changes[nearest])}" if changes[nearest] else "")
 
@@ -216,8 +220,12 @@ def evaluate_policy(
             env.close()
         else:
             # spawn, not fork: the parent may hold Ray's and torch's threads, which fork does not copy safely.
-            with ProcessPoolExecutor(processes, mp_context=get_context("spawn"), initializer=_start_worker,
-                                     initargs=(snapshot, task, max_episode_steps)) as pool:
+            with ProcessPoolExecutor(
+                processes,
+                mp_context=get_context("spawn"),
+                initializer=_start_worker,
+                initargs=(snapshot, task, max_episode_steps),
+            ) as pool:
                 futures = {pool.submit(_play_episode, episode_seed): index for index, episode_seed in enumerate(seeds)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
@@ -236,21 +244,34 @@ def evaluate_checkpoint(
 ) -> EvaluationResult:
     """``evaluate_policy`` on a checkpoint, with its run's episode limit unless one is given."""
     return evaluate_policy(
-        policy_snapshot(checkpoint), task, episodes, seed, processes,
-        max_episode_steps or checkpoint.config.max_episode_steps, progress,
+        policy_snapshot(checkpoint),
+        task,
+        episodes,
+        seed,
+        processes,
+        max_episode_steps or checkpoint.config.max_episode_steps,
+        progress,
     )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("checkpoint", type=Path, metavar="CHECKPOINT",
-                        help="a checkpoint file, or a run directory (its latest checkpoint)")
+    parser.add_argument(
+        "checkpoint",
+        type=Path,
+        metavar="CHECKPOINT",
+        help="a checkpoint file, or a run directory (its latest checkpoint)",
+    )
     parser.add_argument("--episodes", type=positive_int, default=100, help="episodes to play (default 100)")
     parser.add_argument("--task", type=task_argument, default=KUKA_TASK_SPACE.hardest(), help=TASK_HELP)
     parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i (default 0)")
-    parser.add_argument("--processes", type=positive_int,
-                        help=f"worker processes (default: one per CPU, here {available_cpus()})")
-    parser.add_argument("--max-episode-steps", type=positive_int,
-                        help="episode step limit (default: the one the checkpoint was trained with)")
+    parser.add_argument(
+        "--processes", type=positive_int, help=f"worker processes (default: one per CPU, here {available_cpus()})"
+    )
+    parser.add_argument(
+        "--max-episode-steps",
+        type=positive_int,
+        help="episode step limit (default: the one the checkpoint was trained with)",
+    )
     parser.add_argument("--json", type=Path, metavar="PATH", help="also write the results, per episode included, here")
 
 
@@ -260,13 +281,21 @@ def run(args: argparse.Namespace) -> int:
     except UsageError as error:
         print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
         return 2
-    result = evaluate_checkpoint(checkpoint, args.task, args.episodes, args.seed, args.processes,
-                                 args.max_episode_steps)
+    result = evaluate_checkpoint(
+        checkpoint, args.task, args.episodes, args.seed, args.processes, args.max_episode_steps
+    )
     print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
     print(result.summary())
     if args.json is not None:
-        write_json(args.json, {"checkpoint": str(checkpoint.path), "steps": checkpoint.counters.steps,
-                               "teacher": checkpoint.config.teacher, **result.to_dict()})
+        write_json(
+            args.json,
+            {
+                "checkpoint": str(checkpoint.path),
+                "steps": checkpoint.counters.steps,
+                "teacher": checkpoint.config.teacher,
+                **result.to_dict(),
+            },
+        )
     return 0
 
 

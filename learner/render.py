@@ -42,12 +42,14 @@ def check_output(path: Path) -> None:
     if suffix not in FORMATS:
         raise UsageError(f"--out must end in {' or '.join(FORMATS)}, got {path.name!r}")
     if suffix == ".mp4" and importlib.util.find_spec("imageio_ffmpeg") is None:
-        raise UsageError("writing .mp4 needs the imageio-ffmpeg package (pip install imageio-ffmpeg); "
-                         ".gif works without it")
+        raise UsageError(
+            "writing .mp4 needs the imageio-ffmpeg package (pip install imageio-ffmpeg); .gif works without it"
+        )
 
 
-def label_frame(frame: np.ndarray, episode: int, episodes: int, step: int, episode_return: float,
-                success: bool | None) -> np.ndarray:
+def label_frame(
+    frame: np.ndarray, episode: int, episodes: int, step: int, episode_return: float, success: bool | None
+) -> np.ndarray:
     """Draw the episode's progress on a band across the top; ``success`` is None while it runs."""
     image = Image.fromarray(frame).convert("RGBA")
     band = Image.new("RGBA", image.size, (0, 0, 0, 0))
@@ -111,15 +113,27 @@ def write_video(path: Path, frames: list[np.ndarray]) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("checkpoint", type=Path, metavar="CHECKPOINT",
-                        help="a checkpoint file, or a run directory (its latest checkpoint)")
-    parser.add_argument("--out", type=Path, required=True, metavar="FILE.gif|FILE.mp4",
-                        help="the video to write (.mp4 needs imageio-ffmpeg)")
+    parser.add_argument(
+        "checkpoint",
+        type=Path,
+        metavar="CHECKPOINT",
+        help="a checkpoint file, or a run directory (its latest checkpoint)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="FILE.gif|FILE.mp4",
+        help="the video to write (.mp4 needs imageio-ffmpeg)",
+    )
     parser.add_argument("--episodes", type=positive_int, default=3, help="episodes to film (default 3)")
     parser.add_argument("--task", type=task_argument, default=KUKA_TASK_SPACE.hardest(), help=TASK_HELP)
     parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i, as in evaluate (default 0)")
-    parser.add_argument("--max-episode-steps", type=positive_int,
-                        help="episode step limit (default: the one the checkpoint was trained with)")
+    parser.add_argument(
+        "--max-episode-steps",
+        type=positive_int,
+        help="episode step limit (default: the one the checkpoint was trained with)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -130,7 +144,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"kuka-curriculum render: error: {error}", file=sys.stderr)
         return 2
     frames = film_episodes(
-        policy_snapshot(checkpoint), args.task, args.episodes, args.seed,
+        policy_snapshot(checkpoint),
+        args.task,
+        args.episodes,
+        args.seed,
         args.max_episode_steps or checkpoint.config.max_episode_steps,
     )
     write_video(args.out, frames)

@@ -49,8 +49,9 @@ class _TeacherTasks:
         return assignment.task_id, assignment.params
 
     def report(self, episode: EpisodeStats) -> None:
-        self.client.report(Assignment(episode.task_id, episode.task), episode.reward,
-                           success=episode.success, length=episode.length)
+        self.client.report(
+            Assignment(episode.task_id, episode.task), episode.reward, success=episode.success, length=episode.length
+        )
 
 
 @ray.remote(num_cpus=1)
@@ -61,8 +62,13 @@ class RolloutWorker:
         torch.set_num_threads(1)
         self.settings = settings
         self.seed = seed
-        self.client = TeacherClient(settings.teacher_url, settings.curriculum, token=settings.teacher_token,
-                                    prefetch=2 * settings.num_envs, task_timeout=TASK_TIMEOUT_S)
+        self.client = TeacherClient(
+            settings.teacher_url,
+            settings.curriculum,
+            token=settings.teacher_token,
+            prefetch=2 * settings.num_envs,
+            task_timeout=TASK_TIMEOUT_S,
+        )
         envs = [KukaGraspEnv(max_steps=settings.max_episode_steps) for _ in range(settings.num_envs)]
         self.sampler = Sampler(envs, _TeacherTasks(self.client), seed)
         self.evaluation_env: KukaGraspEnv | None = None

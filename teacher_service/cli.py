@@ -13,8 +13,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", help="interface to bind (default 127.0.0.1, env KC_HOST)")
     parser.add_argument("--port", type=int, help="port (default 8000, env KC_PORT)")
     parser.add_argument("--db", type=Path, help="SQLite database (default runs/teacher.db, env KC_DB)")
-    parser.add_argument("--log-level", choices=["critical", "error", "warning", "info", "debug"],
-                        help="log level (default info, env KC_LOG_LEVEL)")
+    parser.add_argument(
+        "--log-level",
+        choices=["critical", "error", "warning", "info", "debug"],
+        help="log level (default info, env KC_LOG_LEVEL)",
+    )
 
 
 def settings_from(args: argparse.Namespace) -> Settings:

@@ -157,12 +157,14 @@ class Curriculum:
         for position, item in enumerate(items):
             index = self.task_index(item.task_id)
             if index is None:
-                errors.append({
-                    "loc": ["body", "results", position, "task_id"],
-                    "msg": f"unknown task id {item.task_id!r}: curriculum {self.name!r} never issued it",
-                    "type": "unknown_task",
-                    "input": item.task_id,
-                })
+                errors.append(
+                    {
+                        "loc": ["body", "results", position, "task_id"],
+                        "msg": f"unknown task id {item.task_id!r}: curriculum {self.name!r} never issued it",
+                        "type": "unknown_task",
+                        "input": item.task_id,
+                    }
+                )
             elif index in claimed or index not in self.outstanding:
                 duplicates += 1
             else:
@@ -198,8 +200,14 @@ class Curriculum:
         job = self.teacher.update(EpisodeResult(task, reward, success, length))
         self.results_received += 1
         self.recent_results.append(
-            RecentResult(task_id=self.task_id(index), params=task, reward=reward, success=success, length=length,
-                         received_at=received_at)
+            RecentResult(
+                task_id=self.task_id(index),
+                params=task,
+                reward=reward,
+                success=success,
+                length=length,
+                received_at=received_at,
+            )
         )
         return job
 
@@ -231,13 +239,26 @@ class Curriculum:
         self.fits_completed += 1
         self.last_fit_at = outcome.finished_at
         self.fit_events.append(
-            FitEvent(index=outcome.index, started_at=outcome.started_at, finished_at=outcome.finished_at,
-                     duration_s=outcome.finished_at - outcome.started_at, replayed=replayed, error=error)
+            FitEvent(
+                index=outcome.index,
+                started_at=outcome.started_at,
+                finished_at=outcome.finished_at,
+                duration_s=outcome.finished_at - outcome.started_at,
+                replayed=replayed,
+                error=error,
+            )
         )
 
     def _fit_row(self, outcome: FitOutcome) -> tuple[Any, ...]:
-        return (self.id, outcome.index, self.teacher.tasks_sampled, self.teacher.results_seen,
-                outcome.started_at, outcome.finished_at, outcome.error)
+        return (
+            self.id,
+            outcome.index,
+            self.teacher.tasks_sampled,
+            self.teacher.results_seen,
+            outcome.started_at,
+            outcome.finished_at,
+            outcome.error,
+        )
 
     def _count_arrivals(self, now: float, count: int) -> None:
         self._arrivals.append((now, count))
@@ -295,12 +316,14 @@ class Curriculum:
 
         results = store.results(self.id)
         total = store.result_count(self.id)
-        for applied, result in enumerate(tqdm(results, total=total, desc=f"replaying {self.name}", unit="result",
-                                              disable=None, leave=False)):
+        for applied, result in enumerate(
+            tqdm(results, total=total, desc=f"replaying {self.name}", unit="result", disable=None, leave=False)
+        ):
             install_recorded(applied)
             draw_to(drawn_before(applied))
-            job = self._learn(result.task_index, result.task, result.reward, result.success, result.length,
-                              result.received_at)
+            job = self._learn(
+                result.task_index, result.task, result.reward, result.success, result.length, result.received_at
+            )
             if job is not None:
                 due.append(job)
         install_recorded(total)
@@ -359,8 +382,13 @@ class CurriculumRegistry:
             curriculum = self._build(stored)
             curriculum.replay()
             self._curricula[stored.name] = curriculum
-            log.info("restored curriculum %r: %d tasks, %d results, %d fits", stored.name,
-                     curriculum.tasks_issued, curriculum.results_received, curriculum.fits_completed)
+            log.info(
+                "restored curriculum %r: %d tasks, %d results, %d fits",
+                stored.name,
+                curriculum.tasks_issued,
+                curriculum.results_received,
+                curriculum.fits_completed,
+            )
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         self._store.start(loop)
@@ -408,6 +436,12 @@ class CurriculumRegistry:
 
     def _build(self, stored: StoredCurriculum) -> Curriculum:
         return Curriculum(
-            stored.id, stored.name, CurriculumSpec.model_validate_json(stored.spec), stored.created_at,
-            self._store, self._fits, self._metrics, self._settings,
+            stored.id,
+            stored.name,
+            CurriculumSpec.model_validate_json(stored.spec),
+            stored.created_at,
+            self._store,
+            self._fits,
+            self._metrics,
+            self._settings,
         )

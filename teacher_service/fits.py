@@ -165,7 +165,8 @@ class FitRunner:
     def _replace(self, dead: BaseProcess) -> None:
         if self._closing or dead is not self._process:
             return
-        log.error("the fit process died (exit code %s); restarting it with %d pending fits",
-                  dead.exitcode, len(self._pending))
+        log.error(
+            "the fit process died (exit code %s); restarting it with %d pending fits", dead.exitcode, len(self._pending)
+        )
         self._retire()
         self._spawn()

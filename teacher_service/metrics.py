@@ -21,23 +21,31 @@ class ServiceMetrics:
             "kc_http_requests", "HTTP requests served.", ["method", "route", "status"], registry=self.registry
         )
         self.request_seconds = Histogram(
-            "kc_http_request_duration_seconds", "Time to answer a request.", ["method", "route"],
-            buckets=_LATENCY_BUCKETS, registry=self.registry,
+            "kc_http_request_duration_seconds",
+            "Time to answer a request.",
+            ["method", "route"],
+            buckets=_LATENCY_BUCKETS,
+            registry=self.registry,
         )
         self.tasks_issued = Counter("kc_tasks_issued", "Tasks handed out.", ["curriculum"], registry=self.registry)
         self.results = Counter(
-            "kc_results", "Results received, by outcome (accepted or duplicate).", ["curriculum", "outcome"],
+            "kc_results",
+            "Results received, by outcome (accepted or duplicate).",
+            ["curriculum", "outcome"],
             registry=self.registry,
         )
         self.fits = Counter("kc_fits", "Teacher model fits installed.", ["curriculum"], registry=self.registry)
-        self.fit_errors = Counter("kc_fit_errors", "Teacher model fits that raised.", ["curriculum"],
-                                  registry=self.registry)
-        self.fit_seconds = Histogram(
-            "kc_fit_duration_seconds", "Time one teacher model fit took.", ["curriculum"],
-            buckets=_FIT_BUCKETS, registry=self.registry,
+        self.fit_errors = Counter(
+            "kc_fit_errors", "Teacher model fits that raised.", ["curriculum"], registry=self.registry
         )
-        self.fits_pending = Gauge("kc_fits_pending", "Fits queued or running.", ["curriculum"],
-                                  registry=self.registry)
+        self.fit_seconds = Histogram(
+            "kc_fit_duration_seconds",
+            "Time one teacher model fit took.",
+            ["curriculum"],
+            buckets=_FIT_BUCKETS,
+            registry=self.registry,
+        )
+        self.fits_pending = Gauge("kc_fits_pending", "Fits queued or running.", ["curriculum"], registry=self.registry)
 
     def render(self) -> bytes:
         return generate_latest(self.registry)

@@ -67,8 +67,20 @@ class ServiceProcess:
         if self._process is not None and self._process.poll() is None:
             raise RuntimeError(f"the service at {self.url} is already running")
         self.db.parent.mkdir(parents=True, exist_ok=True)
-        command = [sys.executable, "-m", "common.cli", "serve", "--host", self.host, "--port", str(self.port),
-                   "--db", str(self.db), "--log-level", "warning"]
+        command = [
+            sys.executable,
+            "-m",
+            "common.cli",
+            "serve",
+            "--host",
+            self.host,
+            "--port",
+            str(self.port),
+            "--db",
+            str(self.db),
+            "--log-level",
+            "warning",
+        ]
         with self.log_path.open("ab") as log:
             self._process = subprocess.Popen(
                 command, stdout=log, stderr=subprocess.STDOUT, env=self.env, start_new_session=self.own_session
@@ -81,7 +93,9 @@ class ServiceProcess:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
-                raise RuntimeError(f"the teacher service at {self.url} exited with code {self._process.returncode}:\n{self._log_tail()}")
+                raise RuntimeError(
+                    f"the teacher service at {self.url} exited with code {self._process.returncode}:\n{self._log_tail()}"
+                )
             try:
                 if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
                     return
@@ -89,7 +103,9 @@ class ServiceProcess:
                 pass
             time.sleep(0.05)
         self.kill()
-        raise RuntimeError(f"the teacher service did not answer {self.url}/healthz within {timeout:.0f} s:\n{self._log_tail()}")
+        raise RuntimeError(
+            f"the teacher service did not answer {self.url}/healthz within {timeout:.0f} s:\n{self._log_tail()}"
+        )
 
     def _log_tail(self, lines: int = 30) -> str:
         return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])

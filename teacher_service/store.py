@@ -64,9 +64,7 @@ CREATE TABLE fits (
 """
 
 INSERT_CURRICULUM = "INSERT INTO curricula (id, name, spec, created_at) VALUES (?, ?, ?, ?)"
-INSERT_TASK = (
-    "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
-)
+INSERT_TASK = "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
 INSERT_RESULT = (
     "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at) VALUES (?, ?, ?, ?, ?, ?)"
 )

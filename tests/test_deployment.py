@@ -124,7 +124,9 @@ def parse_kuka_curriculum(argv: list[str]) -> argparse.Namespace:
 
 def parse_ray(argv: list[str]) -> dict[str, Any]:
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)  # Ray's CLI module imports Ray Serve's pydantic v1-style models
+        warnings.simplefilter(
+            "ignore", DeprecationWarning
+        )  # Ray's CLI module imports Ray Serve's pydantic v1-style models
         from ray.scripts.scripts import cli
 
     name, *arguments = argv[1:]
@@ -262,7 +264,9 @@ def test_teacher_is_reached_where_it_listens(services: dict[str, dict[str, Any]]
     assert urlsplit(train.teacher_url)[:2] == ("http", f"teacher:{settings.port}")
 
 
-def test_teacher_database_lives_on_a_named_volume(services: dict[str, dict[str, Any]], compose_volumes: set[str]) -> None:
+def test_teacher_database_lives_on_a_named_volume(
+    services: dict[str, dict[str, Any]], compose_volumes: set[str]
+) -> None:
     teacher = services["teacher"]
     args = parse_kuka_curriculum(command_of(teacher, "kuka-curriculum", "serve"))
     database = Settings(**({"db": args.db} if args.db else {})).db
@@ -314,7 +318,9 @@ def test_a_restarted_learner_carries_on_and_a_finished_one_stays_down(services: 
     assert learner["restart"] == "on-failure", "a finished run exits 0; restarting it would loop"
 
 
-def test_tensorboard_reads_the_learner_run_directory(services: dict[str, dict[str, Any]], compose_volumes: set[str]) -> None:
+def test_tensorboard_reads_the_learner_run_directory(
+    services: dict[str, dict[str, Any]], compose_volumes: set[str]
+) -> None:
     learner = services["learner"]
     train = parse_kuka_curriculum(command_of(learner, "kuka-curriculum", "train"))
     run_volume, read_only = volume_holding(learner, str(train.run_dir))
@@ -327,10 +333,14 @@ def test_tensorboard_reads_the_learner_run_directory(services: dict[str, dict[st
     assert volume_holding(board, flags.logdir) == (run_volume, True)
 
 
-def test_environment_names_are_read_by_the_programs(services: dict[str, dict[str, Any]], env_example: dict[str, str]) -> None:
+def test_environment_names_are_read_by_the_programs(
+    services: dict[str, dict[str, Any]], env_example: dict[str, str]
+) -> None:
     prefix = Settings.model_config["env_prefix"]
     known = {prefix + field.upper() for field in Settings.model_fields}
-    assert LEARNER_TOKEN_VARIABLE in known, "the learner must send the token from the variable the teacher reads it from"
+    assert LEARNER_TOKEN_VARIABLE in known, (
+        "the learner must send the token from the variable the teacher reads it from"
+    )
     for name, service in services.items():
         for variable in environment_of(service):
             if variable.startswith(prefix):
@@ -351,7 +361,13 @@ def test_env_file_drives_the_training_run(
     env_file.write_text("".join(f"{name}={value}\n" for name, value in {**env_example, **chosen}.items()))
 
     train = parse_kuka_curriculum(command_of(load_compose(env_file)["services"]["learner"], "kuka-curriculum", "train"))
-    assert (train.teacher, train.total_steps, train.workers, train.envs_per_worker, train.seed) == ("manual", 12345, 6, 3, 7)
+    assert (train.teacher, train.total_steps, train.workers, train.envs_per_worker, train.seed) == (
+        "manual",
+        12345,
+        6,
+        3,
+        7,
+    )
 
     defaults = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
     assert defaults.teacher == env_example["TEACHER"]
@@ -361,11 +377,17 @@ def test_env_file_drives_the_training_run(
 
 
 def test_dockerfile_copies_every_package_and_nothing_missing_or_ignored() -> None:
-    ignored = [line.strip() for line in (ROOT / ".dockerignore").read_text().splitlines() if line.strip() and not line.startswith("#")]
+    ignored = [
+        line.strip()
+        for line in (ROOT / ".dockerignore").read_text().splitlines()
+        if line.strip() and not line.startswith("#")
+    ]
     sources = [source for arguments in dockerfile_values("COPY") for source in arguments.split()[:-1]]
     for source in sources:
         assert (ROOT / source).exists(), f"COPY {source}: no such file in the build context"
-        assert not any(fnmatch.fnmatch(source, pattern) for pattern in ignored), f"COPY {source}, but .dockerignore drops it"
+        assert not any(fnmatch.fnmatch(source, pattern) for pattern in ignored), (
+            f"COPY {source}, but .dockerignore drops it"
+        )
 
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())
     packages = {pattern.rstrip("*") for pattern in project["tool"]["setuptools"]["packages"]["find"]["include"]}
@@ -386,7 +408,9 @@ def test_image_starts_the_console_script(capsys: pytest.CaptureFixture[str]) -> 
     assert all(name in usage for name in COMMANDS), "a bare `docker run` should list the sub-commands"
 
 
-def test_torch_comes_from_the_index_the_build_argument_names(services: dict[str, dict[str, Any]], env_example: dict[str, str]) -> None:
+def test_torch_comes_from_the_index_the_build_argument_names(
+    services: dict[str, dict[str, Any]], env_example: dict[str, str]
+) -> None:
     default_index = dict(argument.split("=", 1) for argument in dockerfile_values("ARG"))["TORCH_INDEX_URL"]
     assert default_index.endswith("/whl/cpu")
     torch_install = next(run for run in dockerfile_values("RUN") if run.split()[-1] == "torch")

@@ -78,7 +78,9 @@ def wait_for(ready: Callable[[], bool], process: subprocess.Popen, log_path: Pat
     deadline = time.monotonic() + READY_TIMEOUT_S
     while time.monotonic() < deadline:
         if process.poll() is not None:
-            pytest.fail(f"{what} exited with code {process.returncode}:\n{log_path.read_text(errors='replace')[-3000:]}")
+            pytest.fail(
+                f"{what} exited with code {process.returncode}:\n{log_path.read_text(errors='replace')[-3000:]}"
+            )
         if ready():
             return
         time.sleep(0.5)
@@ -129,9 +131,22 @@ def workspace() -> Iterator[Path]:
 @pytest.fixture
 def ray_head(workspace: Path) -> Iterator[tuple[str, Path]]:
     temp_dir, log_path, port = workspace / "head", workspace / "ray-head.log", free_port()
-    process = launch([str(BIN / "ray"), "start", "--head", f"--port={port}", f"--temp-dir={temp_dir}",
-                      f"--ray-client-server-port={free_port()}", "--num-cpus=1", "--include-dashboard=false",
-                      "--disable-usage-stats", "--block"], log_path, process_environment())
+    process = launch(
+        [
+            str(BIN / "ray"),
+            "start",
+            "--head",
+            f"--port={port}",
+            f"--temp-dir={temp_dir}",
+            f"--ray-client-server-port={free_port()}",
+            "--num-cpus=1",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+            "--block",
+        ],
+        log_path,
+        process_environment(),
+    )
     try:
         wait_for(lambda: RAY_READY_LINE in log_path.read_text(errors="replace"), process, log_path, "the Ray head")
         yield f"127.0.0.1:{port}", temp_dir
@@ -143,10 +158,23 @@ def ray_head(workspace: Path) -> Iterator[tuple[str, Path]]:
 def ray_worker_node(workspace: Path, ray_head: tuple[str, Path]) -> Iterator[Path]:
     head_address, _ = ray_head
     temp_dir, log_path = workspace / "worker", workspace / "ray-worker.log"
-    process = launch([str(BIN / "ray"), "start", f"--address={head_address}", f"--temp-dir={temp_dir}",
-                      "--num-cpus=1", "--disable-usage-stats", "--block"], log_path, process_environment())
+    process = launch(
+        [
+            str(BIN / "ray"),
+            "start",
+            f"--address={head_address}",
+            f"--temp-dir={temp_dir}",
+            "--num-cpus=1",
+            "--disable-usage-stats",
+            "--block",
+        ],
+        log_path,
+        process_environment(),
+    )
     try:
-        wait_for(lambda: RAY_READY_LINE in log_path.read_text(errors="replace"), process, log_path, "the Ray worker node")
+        wait_for(
+            lambda: RAY_READY_LINE in log_path.read_text(errors="replace"), process, log_path, "the Ray worker node"
+        )
         yield temp_dir
     finally:
         stop(process)
@@ -156,8 +184,17 @@ def ray_worker_node(workspace: Path, ray_head: tuple[str, Path]) -> Iterator[Pat
 def teacher_url(workspace: Path) -> Iterator[str]:
     log_path, port = workspace / "teacher.log", free_port()
     url = f"http://127.0.0.1:{port}"
-    process = launch([str(BIN / "kuka-curriculum"), "serve", "--host=127.0.0.1", f"--port={port}",
-                      f"--db={workspace / 'teacher.sqlite3'}"], log_path, process_environment(TOKEN))
+    process = launch(
+        [
+            str(BIN / "kuka-curriculum"),
+            "serve",
+            "--host=127.0.0.1",
+            f"--port={port}",
+            f"--db={workspace / 'teacher.sqlite3'}",
+        ],
+        log_path,
+        process_environment(TOKEN),
+    )
 
     def healthy() -> bool:
         try:
@@ -178,20 +215,36 @@ def test_training_spreads_rollout_actors_over_ray_nodes(
     head_address, head_temp_dir = ray_head
     run_dir = workspace / "run"
     train = subprocess.run(
-        [str(BIN / "kuka-curriculum"), "train", "--teacher=alp-gmm", "--total-steps=3000", "--workers=2",
-         "--envs-per-worker=2", "--rollout-length=256", "--max-episode-steps=200", "--eval-every=0", "--seed=0",
-         f"--run-dir={run_dir}", f"--teacher-url={teacher_url}", f"--ray-address={head_address}"],
-        env=process_environment(TOKEN), capture_output=True, text=True, timeout=TRAIN_TIMEOUT_S,
+        [
+            str(BIN / "kuka-curriculum"),
+            "train",
+            "--teacher=alp-gmm",
+            "--total-steps=3000",
+            "--workers=2",
+            "--envs-per-worker=2",
+            "--rollout-length=256",
+            "--max-episode-steps=200",
+            "--eval-every=0",
+            "--seed=0",
+            f"--run-dir={run_dir}",
+            f"--teacher-url={teacher_url}",
+            f"--ray-address={head_address}",
+        ],
+        env=process_environment(TOKEN),
+        capture_output=True,
+        text=True,
+        timeout=TRAIN_TIMEOUT_S,
     )
     assert train.returncode == 0, f"train failed:\n{train.stdout[-3000:]}\n{train.stderr[-3000:]}"
 
     final_checkpoint = Path(train.stdout.split("final checkpoint:")[-1].strip())
     assert final_checkpoint.is_file() and final_checkpoint.is_relative_to(run_dir)
 
-    placed = {"head": actors_logged_on(head_temp_dir, "RolloutWorker"),
-              "worker node": actors_logged_on(ray_worker_node, "RolloutWorker")}
+    placed = {
+        "head": actors_logged_on(head_temp_dir, "RolloutWorker"),
+        "worker node": actors_logged_on(ray_worker_node, "RolloutWorker"),
+    }
     assert all(placed.values()), f"rollout actors per node: {placed}"
 
     [curriculum] = httpx.get(f"{teacher_url}{API_PREFIX}/curricula", timeout=5.0).json()["curricula"]
     assert curriculum["counters"]["results_received"] > 0, "the teacher heard of no finished episode"
-

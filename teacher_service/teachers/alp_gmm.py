@@ -73,8 +73,9 @@ class AlpGmmParams:
             buffer_size=as_int("buffer_size", self.buffer_size, minimum=1),
             rescale_tasks=as_bool("rescale_tasks", self.rescale_tasks),
             reward_range=as_range("reward_range", self.reward_range),
-            bootstrap_spread=(None if self.bootstrap_spread is None
-                              else as_float("bootstrap_spread", self.bootstrap_spread, low=0.0)),
+            bootstrap_spread=(
+                None if self.bootstrap_spread is None else as_float("bootstrap_spread", self.bootstrap_spread, low=0.0)
+            ),
         )
         if self.min_components > self.max_components:
             raise ValueError(
@@ -98,9 +99,7 @@ class MixtureFit:
     aic_by_components: dict[int, float] = field(default_factory=dict)
 
 
-def fit_mixture(
-    index: int, points: np.ndarray, components: range, nb_em_init: int, random_state: int
-) -> MixtureFit:
+def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: int, random_state: int) -> MixtureFit:
     """Fit one mixture per candidate size and keep the lowest AIC (ties go to fewer components)."""
     with np.errstate(under="ignore"):
         mixtures = {

@@ -48,14 +48,18 @@ def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(traine
     with torch.no_grad():
         network.actor_mean[0].bias.add_(1.0)
     again.load(PolicySnapshot.capture(network, normalizer, version=1))
-    assert not np.allclose(first.act(observations, deterministic=True)[0], again.act(observations, deterministic=True)[0])
+    assert not np.allclose(
+        first.act(observations, deterministic=True)[0], again.act(observations, deterministic=True)[0]
+    )
     assert again.version == 1
 
 
 def test_a_snapshot_of_another_shape_is_refused(trained_looking):
     network, normalizer = trained_looking
     policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0))
-    other = ActorCritic(PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,), angle_indices=network.spec.angle_indices))
+    other = ActorCritic(
+        PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,), angle_indices=network.spec.angle_indices)
+    )
     with pytest.raises(ValueError, match="snapshot is for"):
         policy.load(PolicySnapshot.capture(other, normalizer, version=1))
 

@@ -9,12 +9,20 @@ from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 def test_kuka_space_has_the_books_six_parameters_with_their_anchors():
     assert KUKA_TASK_SPACE.names == ("rnd_obj_x", "rnd_obj_y", "rnd_obj_ang", "jp2", "jp4", "bias_obj_y")
     assert KUKA_TASK_SPACE.hardest() == {
-        "rnd_obj_x": 1.0, "rnd_obj_y": 1.0, "rnd_obj_ang": 1.0,
-        "jp2": 0.413184, "jp4": -1.589317, "bias_obj_y": 0.0,
+        "rnd_obj_x": 1.0,
+        "rnd_obj_y": 1.0,
+        "rnd_obj_ang": 1.0,
+        "jp2": 0.413184,
+        "jp4": -1.589317,
+        "bias_obj_y": 0.0,
     }
     assert KUKA_TASK_SPACE.easiest() == {
-        "rnd_obj_x": 0.0, "rnd_obj_y": 0.0, "rnd_obj_ang": 0.0,
-        "jp2": 1.3, "jp4": -1.0, "bias_obj_y": 0.04,
+        "rnd_obj_x": 0.0,
+        "rnd_obj_y": 0.0,
+        "rnd_obj_ang": 0.0,
+        "jp2": 1.3,
+        "jp4": -1.0,
+        "bias_obj_y": 0.04,
     }
     assert all(p.doc for p in KUKA_TASK_SPACE.parameters)
 

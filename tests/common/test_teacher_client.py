@@ -107,8 +107,7 @@ def test_offline_assignments_keep_a_worker_busy_while_the_teacher_is_down(servic
         offline += [client.next_task() for _ in range(3)]
         assert time.monotonic() - waited < 0.5, "later misses do not wait again"
         assert all(a.offline for a in offline)
-        assert [a.params for a in offline] == [issued[0].params, issued[1].params, issued[2].params,
-                                               issued[0].params]
+        assert [a.params for a in offline] == [issued[0].params, issued[1].params, issued[2].params, issued[0].params]
         client.report(offline[0], reward=3.0)
         assert client.offline_results == 1 and client.pending == 0
 

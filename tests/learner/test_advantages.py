@@ -33,9 +33,13 @@ def test_lambda_one_gives_discounted_return_to_go_minus_value():
 def test_terminal_step_bootstraps_from_zero_and_truncated_step_from_its_final_value():
     gamma, lam = 0.9, 0.8
     rewards, values = [1.0, 1.0, 1.0], [0.2, 0.3, 0.4]
-    terminated = compute_advantages(make_batch(rewards, values, terminated=[False, True, False], last_values=5.0), gamma, lam)[0]
+    terminated = compute_advantages(
+        make_batch(rewards, values, terminated=[False, True, False], last_values=5.0), gamma, lam
+    )[0]
     truncated = compute_advantages(
-        make_batch(rewards, values, truncated=[False, True, False], final_values=[0.0, 7.0, 0.0], last_values=5.0), gamma, lam
+        make_batch(rewards, values, truncated=[False, True, False], final_values=[0.0, 7.0, 0.0], last_values=5.0),
+        gamma,
+        lam,
     )[0]
     assert terminated[1, 0] == pytest.approx(1.0 - 0.3)
     assert truncated[1, 0] == pytest.approx(1.0 + gamma * 7.0 - 0.3)

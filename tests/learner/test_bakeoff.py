@@ -14,9 +14,26 @@ from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
 TINY = [
-    "--seeds", "1", "--workers", "1", "--envs-per-worker", "2", "--rollout-length", "128",
-    "--max-episode-steps", "60", "--checkpoint-every", "1", "--curve-every", "1", "--curve-episodes", "2",
-    "--eval-episodes", "3", "--eval-processes", "1",
+    "--seeds",
+    "1",
+    "--workers",
+    "1",
+    "--envs-per-worker",
+    "2",
+    "--rollout-length",
+    "128",
+    "--max-episode-steps",
+    "60",
+    "--checkpoint-every",
+    "1",
+    "--curve-every",
+    "1",
+    "--curve-episodes",
+    "2",
+    "--eval-episodes",
+    "3",
+    "--eval-processes",
+    "1",
 ]
 
 
@@ -69,8 +86,9 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert "rollout_length: 128 before, 64 now" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("flags", "message"), [(["--teachers", "curious"], "invalid choice"),
-                                                (["--seeds", "0"], "at least 1")])
+@pytest.mark.parametrize(
+    ("flags", "message"), [(["--teachers", "curious"], "invalid choice"), (["--seeds", "0"], "at least 1")]
+)
 def test_bad_bakeoff_flags_are_refused(tmp_path, capsys, flags, message):
     with pytest.raises(SystemExit) as exit_info:
         main(["bakeoff", "--out", str(tmp_path), *flags])

@@ -46,7 +46,9 @@ def test_every_setting_has_a_one_line_doc():
         for index, statement in enumerate(body):
             if isinstance(statement, ast.AnnAssign):
                 following = body[index + 1] if index + 1 < len(body) else None
-                assert isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant), statement.target.id
+                assert isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant), (
+                    statement.target.id
+                )
                 assert "\n" not in following.value.value.strip(), statement.target.id
 
 

@@ -39,14 +39,17 @@ def test_evaluate_prints_and_writes_intervals_of_the_episodes_it_played(checkpoi
     success = wilson_interval(sum(per_episode["success"]), 5)
     assert written["return"] == returns.to_dict() and written["success_rate"] == success.to_dict()
     printed = capsys.readouterr().out
-    assert (f"hardest task, 5 episodes: return {returns.estimate:.2f} ± {returns.half_width:.2f} (95% CI), "
-            f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson 95%), "
-            f"mean length {written['mean_length']:.0f}") in printed
+    assert (
+        f"hardest task, 5 episodes: return {returns.estimate:.2f} ± {returns.half_width:.2f} (95% CI), "
+        f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson 95%), "
+        f"mean length {written['mean_length']:.0f}"
+    ) in printed
 
     # Episode i is the deterministic policy's episode with seed 7 + i.
     env = KukaGraspEnv(max_steps=TINY_EPISODE_STEPS)
-    expected = run_episodes(env, InferencePolicy(policy_snapshot(load_checkpoint(checkpoint))),
-                            KUKA_TASK_SPACE.hardest(), range(7, 12))
+    expected = run_episodes(
+        env, InferencePolicy(policy_snapshot(load_checkpoint(checkpoint))), KUKA_TASK_SPACE.hardest(), range(7, 12)
+    )
     env.close()
     assert per_episode["return"] == [episode.reward for episode in expected]
 
@@ -62,8 +65,22 @@ def test_results_do_not_depend_on_how_many_processes_share_the_episodes(checkpoi
 
 def test_a_run_directory_means_its_latest_checkpoint_and_a_task_can_be_chosen(checkpoint, tmp_path, capsys):
     out = tmp_path / "easy.json"
-    code = main(["evaluate", str(checkpoint.parent.parent), "--episodes", "2", "--processes", "1",
-                 "--task", "easiest,jp2=1.1", "--max-episode-steps", "15", "--json", str(out)])
+    code = main(
+        [
+            "evaluate",
+            str(checkpoint.parent.parent),
+            "--episodes",
+            "2",
+            "--processes",
+            "1",
+            "--task",
+            "easiest,jp2=1.1",
+            "--max-episode-steps",
+            "15",
+            "--json",
+            str(out),
+        ]
+    )
     assert code == 0
     written = json.loads(out.read_text())
     assert written["checkpoint"] == str(checkpoint)
@@ -77,10 +94,15 @@ def test_task_strings():
     assert parse_task("easiest") == KUKA_TASK_SPACE.easiest()
     assert parse_task(" jp2 = 1.0 , rnd_obj_x=0.5") == {**KUKA_TASK_SPACE.hardest(), "jp2": 1.0, "rnd_obj_x": 0.5}
     assert describe_task(parse_task("jp2=1.0")) == "hardest task with jp2=1"
-    for text, message in [("medium", "unknown task 'medium'"), ("jp2", "unknown task 'jp2'"),
-                          ("jp2=high", "'jp2' must be a number"), ("jp2=5", r"'jp2'=5.0 is outside its bounds"),
-                          ("grip=1", r"unknown task parameter\(s\) \['grip'\]"), ("jp2=1,jp2=1.1", "given twice"),
-                          ("", "empty task")]:
+    for text, message in [
+        ("medium", "unknown task 'medium'"),
+        ("jp2", "unknown task 'jp2'"),
+        ("jp2=high", "'jp2' must be a number"),
+        ("jp2=5", r"'jp2'=5.0 is outside its bounds"),
+        ("grip=1", r"unknown task parameter\(s\) \['grip'\]"),
+        ("jp2=1,jp2=1.1", "given twice"),
+        ("", "empty task"),
+    ]:
         with pytest.raises(ValueError, match=message):
             parse_task(text)
 
@@ -99,7 +121,9 @@ def test_bad_input_is_refused_in_one_line(checkpoint, tmp_path, capsys):
     assert "jp2" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("model", sorted(Path(__file__).parents[2].joinpath("models").glob("*.pt")), ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "model", sorted(Path(__file__).parents[2].joinpath("models").glob("*.pt")), ids=lambda p: p.name
+)
 def test_the_committed_policies_load_and_play(model, capsys):
     assert main(["evaluate", str(model), "--episodes", "2"]) == 0
     assert "hardest task, 2 episodes: return" in capsys.readouterr().out

@@ -37,8 +37,10 @@ def test_mean_interval_is_the_student_t_interval():
 
 def test_mean_intervals_cover_the_true_mean_95_percent_of_the_time():
     rng = np.random.default_rng(0)
-    covered = [interval.low <= 0.0 <= interval.high
-               for interval in (mean_interval(rng.normal(0.0, 3.0, size=8)) for _ in range(4000))]
+    covered = [
+        interval.low <= 0.0 <= interval.high
+        for interval in (mean_interval(rng.normal(0.0, 3.0, size=8)) for _ in range(4000))
+    ]
     assert np.mean(covered) == pytest.approx(0.95, abs=0.01)
 
 

@@ -20,16 +20,40 @@ from learner.teacher_process import local_teacher_service
 from teacher_service.process import free_port
 
 SMALL_RUN = [
-    "--teacher", "random", "--workers", "2", "--envs-per-worker", "2", "--rollout-length", "250",
-    "--max-episode-steps", "150", "--checkpoint-every", "2", "--eval-every", "2", "--eval-episodes", "2",
+    "--teacher",
+    "random",
+    "--workers",
+    "2",
+    "--envs-per-worker",
+    "2",
+    "--rollout-length",
+    "250",
+    "--max-episode-steps",
+    "150",
+    "--checkpoint-every",
+    "2",
+    "--eval-every",
+    "2",
+    "--eval-episodes",
+    "2",
 ]
 BATCH = 2 * 2 * 250
 TIMEOUT_S = 240
 
 
 def train_command(run_dir: Path, ray_address: str, *flags: str) -> list[str]:
-    return [sys.executable, "-m", "common.cli", "train", *SMALL_RUN, "--run-dir", str(run_dir),
-            "--ray-address", ray_address, *flags]
+    return [
+        sys.executable,
+        "-m",
+        "common.cli",
+        "train",
+        *SMALL_RUN,
+        "--run-dir",
+        str(run_dir),
+        "--ray-address",
+        ray_address,
+        *flags,
+    ]
 
 
 def train(run_dir: Path, ray_address: str, *flags: str) -> subprocess.CompletedProcess:
@@ -78,8 +102,13 @@ def test_train_logs_checkpoints_reports_every_episode_resumes_and_stops_on_ctrl_
     assert [event.step for event in events.Scalars("loss/policy_loss")] == [BATCH, 2 * BATCH, 3 * BATCH]
 
     # Resume with a larger budget, then stop it the way a person would: Ctrl-C in its terminal.
-    resumed = subprocess.Popen(train_command(run_dir, ray_cluster, "--total-steps", "1000000", "--resume"),
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    resumed = subprocess.Popen(
+        train_command(run_dir, ray_cluster, "--total-steps", "1000000", "--resume"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
     try:
         wait_for(lambda: len(metrics(run_dir)) >= 5, what="two iterations after resuming")
         os.killpg(resumed.pid, signal.SIGINT)
@@ -105,8 +134,12 @@ def test_training_finishes_when_a_rollout_actor_is_killed_mid_run(tmp_path, ray_
     import ray
 
     run_dir = tmp_path / "fault"
-    process = subprocess.Popen(train_command(run_dir, ray_cluster, "--total-steps", "4000", "--eval-every", "0"),
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        train_command(run_dir, ray_cluster, "--total-steps", "4000", "--eval-every", "0"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         wait_for(lambda: metrics(run_dir), what="the first iteration")
         victim = f"{curriculum_name(run_dir)}-worker-0-0"
@@ -125,8 +158,18 @@ def test_a_teacher_outage_mid_run_loses_no_episode_result(tmp_path, ray_cluster)
     port = free_port()
     teacher_url = f"http://127.0.0.1:{port}"
     database = tmp_path / "teacher.sqlite"
-    serve = [sys.executable, "-m", "common.cli", "serve", "--port", str(port), "--db", str(database),
-             "--log-level", "warning"]
+    serve = [
+        sys.executable,
+        "-m",
+        "common.cli",
+        "serve",
+        "--port",
+        str(port),
+        "--db",
+        str(database),
+        "--log-level",
+        "warning",
+    ]
 
     def start_teacher() -> subprocess.Popen:
         teacher = subprocess.Popen(serve, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -135,9 +178,12 @@ def test_a_teacher_outage_mid_run_loses_no_episode_result(tmp_path, ray_cluster)
 
     run_dir = tmp_path / "outage"
     teacher = start_teacher()
-    process = subprocess.Popen(train_command(run_dir, ray_cluster, "--total-steps", "5000", "--eval-every", "0",
-                                             "--teacher-url", teacher_url),
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        train_command(run_dir, ray_cluster, "--total-steps", "5000", "--eval-every", "0", "--teacher-url", teacher_url),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         wait_for(lambda: metrics(run_dir), what="the first iteration")
         teacher.terminate()

@@ -13,7 +13,8 @@ TINY_EPISODE_STEPS = 40
 
 
 def save_untrained_checkpoint(run_dir: Path, seed: int = 0) -> Path:
-    config = TrainConfig(teacher="fixed", seed=seed, max_episode_steps=TINY_EPISODE_STEPS,
-                         ppo=PPOConfig(hidden_sizes=(16, 16)))
+    config = TrainConfig(
+        teacher="fixed", seed=seed, max_episode_steps=TINY_EPISODE_STEPS, ppo=PPOConfig(hidden_sizes=(16, 16))
+    )
     learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed)
     return save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=512, episodes=4), config)

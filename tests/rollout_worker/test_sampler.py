@@ -73,7 +73,9 @@ def test_each_episode_is_reported_once_with_its_own_task_return_and_length(envs)
     for step, env_index in zip(*np.nonzero(batch.terminated | batch.truncated)):
         rewards = batch.rewards[episode_start[env_index] : step + 1, env_index]
         task_index = tasks.handed_out.index(current_tasks[env_index])
-        expected.append((f"random:{task_index}", current_tasks[env_index], pytest.approx(rewards.sum(), rel=1e-5), len(rewards)))
+        expected.append(
+            (f"random:{task_index}", current_tasks[env_index], pytest.approx(rewards.sum(), rel=1e-5), len(rewards))
+        )
         current_tasks[env_index] = next(handed_out)
         episode_start[env_index] = step + 1
     assert len(expected) >= 6

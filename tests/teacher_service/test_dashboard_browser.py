@@ -70,10 +70,14 @@ def open_page(browser: Browser, url: str, service: ServiceProcess) -> tuple[Page
     page.on("console", lambda message: message.type == "error" and problems.console.append(message.text))
     page.on("pageerror", lambda error: problems.exceptions.append(str(error)))
     page.on("requestfailed", lambda request: problems.failed.append(f"{request.url}: {request.failure}"))
-    page.on("response", lambda response: response.status >= 400
-            and problems.http_errors.append(f"{response.status} {response.url}"))
-    page.on("request", lambda request: request.url.startswith((service.url, "data:"))
-            or problems.foreign.append(request.url))
+    page.on(
+        "response",
+        lambda response: response.status >= 400 and problems.http_errors.append(f"{response.status} {response.url}"),
+    )
+    page.on(
+        "request",
+        lambda request: request.url.startswith((service.url, "data:")) or problems.foreign.append(request.url),
+    )
     page.goto(url)
     return page, problems
 
@@ -207,7 +211,9 @@ def test_alp_gmm_dashboard_draws_the_posted_results_and_the_mixture(browser: Bro
     page.close()
 
 
-def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(browser: Browser, service: ServiceProcess) -> None:
+def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(
+    browser: Browser, service: ServiceProcess
+) -> None:
     create_curriculum(service, "kuka-manual", "manual", {"min_episodes": 10, "window": 10})
     train(service, "kuka-manual", 20, batch=10)
     teacher = httpx.get(f"{service.url}{API_PREFIX}/curricula/kuka-manual/state", timeout=10).json()["teacher"]

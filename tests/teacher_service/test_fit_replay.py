@@ -12,8 +12,14 @@ def _never_run() -> None:
 
 
 def test_a_fit_that_failed_live_fails_again_on_replay_without_running() -> None:
-    recorded = StoredFit(index=3, tasks_sampled=40, results_seen=32, started_at=10.0, finished_at=11.5,
-                         error="MemoryError: fit process ran out of memory")
+    recorded = StoredFit(
+        index=3,
+        tasks_sampled=40,
+        results_seen=32,
+        started_at=10.0,
+        finished_at=11.5,
+        error="MemoryError: fit process ran out of memory",
+    )
     outcome = _rerun(FitJob(index=3, run=_never_run), recorded)
     assert (outcome.index, outcome.output, outcome.error) == (3, None, recorded.error)
     assert (outcome.started_at, outcome.finished_at) == (10.0, 11.5)

@@ -15,8 +15,15 @@ import pytest
 
 from common.task_space import KUKA_TASK_SPACE
 
-def _create(http: httpx.Client, name: str, space: list[dict[str, Any]], teacher: str = "random",
-            params: dict[str, Any] | None = None, seed: int = 0) -> httpx.Response:
+
+def _create(
+    http: httpx.Client,
+    name: str,
+    space: list[dict[str, Any]],
+    teacher: str = "random",
+    params: dict[str, Any] | None = None,
+    seed: int = 0,
+) -> httpx.Response:
     body = {"teacher": teacher, "space": space, "params": params or {}, "seed": seed}
     return http.put(f"/curricula/{name}", json=body)
 
@@ -127,8 +134,9 @@ def test_tasks_from_an_unknown_curriculum_is_404(http):
 def test_results_are_accepted_once_per_task(http, kuka_space):
     _create(http, "results-a", kuka_space)
     tasks = _draw(http, "results-a", 3)
-    results = [{"task_id": t["task_id"], "reward": float(i), "success": i == 2, "length": 10 + i}
-               for i, t in enumerate(tasks)]
+    results = [
+        {"task_id": t["task_id"], "reward": float(i), "success": i == 2, "length": 10 + i} for i, t in enumerate(tasks)
+    ]
     assert _report(http, "results-a", results).json() == {"accepted": 3, "duplicates": 0}
     assert _report(http, "results-a", results).json() == {"accepted": 0, "duplicates": 3}
 
@@ -169,9 +177,13 @@ def test_non_finite_rewards_are_rejected_by_index(http, kuka_space, literal):
     _create(http, "results-finite", kuka_space)
     task = _draw(http, "results-finite", 1)[0]
     body = '{"results": [{"task_id": "%s", "reward": 1.0}, {"task_id": "%s", "reward": %s}]}' % (
-        task["task_id"], task["task_id"], literal)
-    response = http.post("/curricula/results-finite/results", content=body,
-                         headers={"Content-Type": "application/json"})
+        task["task_id"],
+        task["task_id"],
+        literal,
+    )
+    response = http.post(
+        "/curricula/results-finite/results", content=body, headers={"Content-Type": "application/json"}
+    )
     errors = _errors(response)
     assert errors == [(("body", "results", 1, "reward"), "Input should be a finite number")]
     assert _counters(http, "results-finite")["results_received"] == 0
@@ -180,8 +192,11 @@ def test_non_finite_rewards_are_rejected_by_index(http, kuka_space, literal):
 def test_state_shows_the_teacher_and_recent_results(http, kuka_space):
     _create(http, "state-a", kuka_space, teacher="fixed")
     tasks = _draw(http, "state-a", 4)
-    _report(http, "state-a", [{"task_id": t["task_id"], "reward": i / 2, "success": None, "length": 5}
-                              for i, t in enumerate(tasks)])
+    _report(
+        http,
+        "state-a",
+        [{"task_id": t["task_id"], "reward": i / 2, "success": None, "length": 5} for i, t in enumerate(tasks)],
+    )
     state = http.get("/curricula/state-a/state").json()
     assert state["teacher"]["kind"] == "fixed"
     assert state["teacher"]["point"] == KUKA_TASK_SPACE.hardest()
@@ -200,8 +215,9 @@ def test_refits_run_while_tasks_keep_being_served(http, kuka_space):
     answered_at = []
     for _ in range(2):
         tasks = _draw(http, "refit-a", 100)
-        results = [{"task_id": t["task_id"], "reward": 10 * t["params"]["rnd_obj_x"] + 0.1 * i}
-                   for i, t in enumerate(tasks)]
+        results = [
+            {"task_id": t["task_id"], "reward": 10 * t["params"]["rnd_obj_x"] + 0.1 * i} for i, t in enumerate(tasks)
+        ]
         assert _report(http, "refit-a", results).json()["accepted"] == 100
         _draw(http, "refit-a", 1)
         answered_at.append(time.time())
@@ -259,8 +275,11 @@ def test_healthz_and_prometheus_metrics(http, service, kuka_space):
 
 
 def test_oversized_bodies_are_refused(http, service):
-    response = http.post("/curricula/anything/results", content=b"[" + b" " * (2 << 20) + b"]",
-                         headers={"Content-Type": "application/json"})
+    response = http.post(
+        "/curricula/anything/results",
+        content=b"[" + b" " * (2 << 20) + b"]",
+        headers={"Content-Type": "application/json"},
+    )
     assert response.status_code == 413
 
 
@@ -268,8 +287,13 @@ def test_openapi_documents_every_endpoint_and_error(service):
     schema = httpx.get(f"{service.url}/openapi.json").json()
     paths = schema["paths"]
     assert set(paths) >= {
-        "/api/v1/curricula", "/api/v1/curricula/{name}", "/api/v1/curricula/{name}/tasks",
-        "/api/v1/curricula/{name}/results", "/api/v1/curricula/{name}/state", "/healthz", "/metrics",
+        "/api/v1/curricula",
+        "/api/v1/curricula/{name}",
+        "/api/v1/curricula/{name}/tasks",
+        "/api/v1/curricula/{name}/results",
+        "/api/v1/curricula/{name}/state",
+        "/healthz",
+        "/metrics",
     }
     put = paths["/api/v1/curricula/{name}"]["put"]
     assert {"200", "201", "401", "409", "413", "422"} <= set(put["responses"])

@@ -49,8 +49,10 @@ class Mirror:
         return tasks
 
     def report(self, tasks: list[dict[str, Any]]) -> None:
-        results = [{"task_id": t["task_id"], "reward": _reward(t["params"], len(self.reported) + i), "length": 50}
-                   for i, t in enumerate(tasks)]
+        results = [
+            {"task_id": t["task_id"], "reward": _reward(t["params"], len(self.reported) + i), "length": 50}
+            for i, t in enumerate(tasks)
+        ]
         assert self.api.post(f"/curricula/{NAME}/results", json={"results": results}).json()["accepted"] == len(tasks)
         for task, result in zip(tasks, results):
             job = self.reference.update(EpisodeResult(task["params"], result["reward"], None, 50))
@@ -76,8 +78,12 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes):
     service = ServiceProcess(tmp_path / "teacher.db").start()
     try:
         api = httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0)
-        assert api.put(f"/curricula/{NAME}", json={"teacher": "alp-gmm", "space": space, "params": PARAMS,
-                                                   "seed": SEED}).status_code == 201
+        assert (
+            api.put(
+                f"/curricula/{NAME}", json={"teacher": "alp-gmm", "space": space, "params": PARAMS, "seed": SEED}
+            ).status_code
+            == 201
+        )
         mirror = Mirror(api)
         mirror.report(mirror.draw(8))
         mirror.report(mirror.draw(8))  # result 16: fit 0 falls due (and starts the fit process)
@@ -114,7 +120,8 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes):
         late = [{"task_id": t["task_id"], "reward": 1.0} for t in unreported]
         again = [{"task_id": r["task_id"], "reward": r["reward"]} for r in mirror.reported[:2]]
         assert api.post(f"/curricula/{NAME}/results", json={"results": late + again}).json() == {
-            "accepted": 3, "duplicates": 2,
+            "accepted": 3,
+            "duplicates": 2,
         }
         api.close()
     finally:

@@ -32,8 +32,10 @@ _WRITE: dict[int | str, dict[str, Any]] = {
     401: {"model": ErrorMessage, "description": "KC_TEACHER_TOKEN is set and the bearer token is missing or wrong."},
     413: {
         "description": "The request body is larger than the service accepts (KC_MAX_BODY_BYTES).",
-        "content": {"text/plain": {"schema": {"type": "string"}},
-                    "application/json": {"schema": ErrorMessage.model_json_schema()}},
+        "content": {
+            "text/plain": {"schema": {"type": "string"}},
+            "application/json": {"schema": ErrorMessage.model_json_schema()},
+        },
     },
 }
 

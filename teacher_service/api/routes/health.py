@@ -19,8 +19,12 @@ async def healthz(registry: RegistryDep) -> Health:
 @router.get(
     "/metrics",
     response_class=Response,
-    responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}},
-                     "description": "Prometheus text exposition format."}},
+    responses={
+        200: {
+            "content": {"text/plain": {"schema": {"type": "string"}}},
+            "description": "Prometheus text exposition format.",
+        }
+    },
 )
 async def metrics(service_metrics: MetricsDep) -> Response:
     return Response(service_metrics.render(), media_type=CONTENT_TYPE_LATEST)
