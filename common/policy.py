@@ -76,7 +76,7 @@ def _layer(in_features: int, out_features: int, gain: float) -> nn.Linear:
 
 def _mlp(sizes: list[int], output_gain: float) -> nn.Sequential:
     layers: list[nn.Module] = []
-    for in_features, out_features in zip(sizes[:-2], sizes[1:-1]):
+    for in_features, out_features in zip(sizes[:-2], sizes[1:-1], strict=True):
         layers += [_layer(in_features, out_features, np.sqrt(2)), nn.Tanh()]
     layers.append(_layer(sizes[-2], sizes[-1], output_gain))
     return nn.Sequential(*layers)
@@ -153,7 +153,7 @@ class InferencePolicy:
         fused = [(np.concatenate([actor[0][0], critic[0][0]]), np.concatenate([actor[0][1], critic[0][1]]))]
         fused += [
             (_block_diagonal(a_weight, c_weight), np.concatenate([a_bias, c_bias]))
-            for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:])
+            for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:], strict=True)
         ]
         # Stored as (in, out) so a layer is one ``x @ w + b``.
         self._layers = [(np.ascontiguousarray(w.T, dtype=np.float32), b.astype(np.float32)) for w, b in fused]

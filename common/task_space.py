@@ -91,7 +91,7 @@ class TaskSpace:
     def from_array(self, values: np.ndarray) -> Task:
         """Map a vector to a task, clipping into the box (sampling noise can step outside)."""
         clipped = np.clip(np.asarray(values, dtype=np.float64), self.low, self.high)
-        return {name: float(v) for name, v in zip(self.names, clipped)}
+        return {name: float(v) for name, v in zip(self.names, clipped, strict=True)}
 
     def to_unit(self, points: np.ndarray) -> np.ndarray:
         """Rescale points (n, d) to [0, 1] per dimension; a zero-width dimension maps to 0."""

@@ -265,7 +265,7 @@ class TeacherResult:
                     "success_rate": result.success_rate.estimate,
                     "mean_length": result.mean_length,
                 }
-                for run, result in zip(self.runs, self.evaluations)
+                for run, result in zip(self.runs, self.evaluations, strict=True)
             ],
         }
 

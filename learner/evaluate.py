@@ -164,7 +164,9 @@ class EvaluationResult:
         per_episode = data["per_episode"]
         episodes = tuple(
             EpisodeStats(task=task, reward=float(reward), success=bool(success), length=int(length))
-            for reward, success, length in zip(per_episode["return"], per_episode["success"], per_episode["length"])
+            for reward, success, length in zip(
+                per_episode["return"], per_episode["success"], per_episode["length"], strict=True
+            )
         )
         return cls(task=task, seed=int(data["seed"]), episodes=episodes)
 

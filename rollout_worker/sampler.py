@@ -96,7 +96,7 @@ class Sampler:
                     observation = self._start_episode(index)
                 self._observations[index] = observation
             if cut_short:
-                indices, final_observations = zip(*cut_short)
+                indices, final_observations = zip(*cut_short, strict=True)
                 final_values[step, list(indices)] = policy.value(np.stack(final_observations))
 
         return TrajectoryBatch(

@@ -136,7 +136,7 @@ class Curriculum:
         rows = [(self.id, first + i, json.dumps(task), results_seen, issued_at) for i, task in enumerate(tasks)]
 
         def stored() -> None:
-            self.outstanding.update(zip(range(first, first + count), tasks))
+            self.outstanding.update(zip(range(first, first + count), tasks, strict=True))
             self.tasks_issued += count
             self.issued_through = max(self.issued_through, first + count)
             self._tasks_counter.inc(count)

@@ -91,14 +91,14 @@ def test_same_seed_same_placement_and_trajectory():
 def test_two_envs_in_one_process_do_not_disturb_each_other():
     seeds, actions = (3, 4), (random_actions(3), random_actions(4))
     separate = []
-    for seed, episode_actions in zip(seeds, actions):
+    for seed, episode_actions in zip(seeds, actions, strict=True):
         env = KukaGraspEnv(task=EASIEST)
         env.reset(seed=seed)
         separate.append(rollout(env, episode_actions))
         env.close()
 
     envs = [KukaGraspEnv(task=EASIEST) for _ in seeds]
-    for env, seed in zip(envs, seeds):
+    for env, seed in zip(envs, seeds, strict=True):
         env.reset(seed=seed)
     interleaved: list[list[tuple]] = [[], []]
     running = [True, True]

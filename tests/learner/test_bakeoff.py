@@ -62,7 +62,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     results = json.loads((out / "results.json").read_text())
     assert [entry["teacher"] for entry in results["teachers"]] == ["fixed", "random"]
     table = (out / "results.md").read_text()
-    for entry, run in zip(results["teachers"], (fixed, random)):
+    for entry, run in zip(results["teachers"], (fixed, random), strict=True):
         evaluation = json.loads((run.directory / "evaluation.json").read_text())
         returns = mean_interval(evaluation["per_episode"]["return"])
         assert evaluation["checkpoint"] == latest_checkpoint(run.directory).name, "the final policy is evaluated"

@@ -70,7 +70,7 @@ def test_each_episode_is_reported_once_with_its_own_task_return_and_length(envs)
     current_tasks, handed_out = list(tasks.handed_out[:3]), iter(tasks.handed_out[3:])
     episode_start = [0, 0, 0]
     expected = []
-    for step, env_index in zip(*np.nonzero(batch.terminated | batch.truncated)):
+    for step, env_index in zip(*np.nonzero(batch.terminated | batch.truncated), strict=True):
         rewards = batch.rewards[episode_start[env_index] : step + 1, env_index]
         task_index = tasks.handed_out.index(current_tasks[env_index])
         expected.append(

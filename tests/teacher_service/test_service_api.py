@@ -229,7 +229,7 @@ def test_refits_run_while_tasks_keep_being_served(http, kuka_space):
     state = http.get("/curricula/refit-a/state").json()
     fits = state["fits"]
     assert [f["index"] for f in fits] == [0, 1] and not any(f["replayed"] or f["error"] for f in fits)
-    for fit, answered in zip(fits, answered_at):
+    for fit, answered in zip(fits, answered_at, strict=True):
         assert answered < fit["finished_at"]
     assert state["curriculum"]["counters"]["last_fit_at"] == fits[-1]["finished_at"]
     assert state["teacher"]["fits"] == 2 and state["teacher"]["components"]

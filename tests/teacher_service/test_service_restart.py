@@ -54,7 +54,7 @@ class Mirror:
             for i, t in enumerate(tasks)
         ]
         assert self.api.post(f"/curricula/{NAME}/results", json={"results": results}).json()["accepted"] == len(tasks)
-        for task, result in zip(tasks, results):
+        for task, result in zip(tasks, results, strict=True):
             job = self.reference.update(EpisodeResult(task["params"], result["reward"], None, 50))
             if job is not None:
                 self.due.append(job)
