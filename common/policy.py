@@ -179,10 +179,7 @@ class InferencePolicy:
     def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
         mean, values = self._forward(observations)
-        if deterministic:
-            noise = np.zeros_like(mean)
-        else:
-            noise = self.rng.standard_normal(mean.shape, dtype=np.float32)
+        noise = np.zeros_like(mean) if deterministic else self.rng.standard_normal(mean.shape, dtype=np.float32)
         log_probs = (-0.5 * (noise * noise).sum(axis=-1) - self._log_density_offset).astype(np.float32)
         return mean + self._std * noise, log_probs, values
 

@@ -20,7 +20,6 @@ from common.teacher_client import Assignment, TeacherClient
 from common.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.sampler import Sampler, run_episodes
 
-
 TASK_TIMEOUT_S = 2.0
 """How long a worker waits for the teacher before playing an offline episode: short, because
 every environment whose episode ends during an outage pays it."""

@@ -22,7 +22,6 @@ from teacher_service.dashboard import router as dashboard_router
 from teacher_service.metrics import MetricsMiddleware, ServiceMetrics
 from teacher_service.store import Store
 
-
 YOUNG_GENERATION_THRESHOLD = 20_000
 """Allocations between young-generation collections (Python's default is 700): a request allocates
 hundreds of short-lived containers, and collecting that often costs a tenth of the CPU at load."""

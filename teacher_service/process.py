@@ -94,7 +94,8 @@ class ServiceProcess:
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
                 raise RuntimeError(
-                    f"the teacher service at {self.url} exited with code {self._process.returncode}:\n{self._log_tail()}"
+                    f"the teacher service at {self.url} exited with code {self._process.returncode}:\n"
+                    f"{self._log_tail()}"
                 )
             try:
                 if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:

@@ -40,7 +40,7 @@ def zero_action_episodes(env: KukaGraspEnv, task: dict[str, float], seeds: range
     results = []
     for seed in seeds:
         env.reset(seed=seed, options={"task": task})
-        for length in range(1, env.max_steps + 1):
+        for length in range(1, env.max_steps + 1):  # noqa: B007  read after the loop: the episode's length
             _, _, terminated, truncated, info = env.step(np.zeros(3, dtype=np.float32))
             if terminated or truncated:
                 break

@@ -120,9 +120,11 @@ def test_offline_assignments_keep_a_worker_busy_while_the_teacher_is_down(servic
 
 
 def test_no_task_at_all_is_an_error_not_a_hang():
-    with TeacherClient(f"http://127.0.0.1:{free_port()}", "kuka", task_timeout=0.3, backoff=FAST_RETRIES) as client:
-        with pytest.raises(TeacherUnavailable, match="none issued before"):
-            client.next_task()
+    with (
+        TeacherClient(f"http://127.0.0.1:{free_port()}", "kuka", task_timeout=0.3, backoff=FAST_RETRIES) as client,
+        pytest.raises(TeacherUnavailable, match="none issued before"),
+    ):
+        client.next_task()
 
 
 def test_invalid_results_are_dropped_and_the_rest_delivered(service):

@@ -176,7 +176,7 @@ def test_one_bad_result_rejects_the_request_and_says_which_and_why(http, kuka_sp
 def test_non_finite_rewards_are_rejected_by_index(http, kuka_space, literal):
     _create(http, "results-finite", kuka_space)
     task = _draw(http, "results-finite", 1)[0]
-    body = '{"results": [{"task_id": "%s", "reward": 1.0}, {"task_id": "%s", "reward": %s}]}' % (
+    body = '{"results": [{"task_id": "%s", "reward": 1.0}, {"task_id": "%s", "reward": %s}]}' % (  # noqa: UP031  JSON's braces would need doubling in an f-string
         task["task_id"],
         task["task_id"],
         literal,

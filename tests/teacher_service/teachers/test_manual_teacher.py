@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE, DEFAULT_JP2, DEFAULT_JP4, Parameter, TaskSpace
+from common.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 
