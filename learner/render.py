@@ -43,7 +43,8 @@ def check_output(path: Path) -> None:
         raise UsageError(f"--out must end in {' or '.join(FORMATS)}, got {path.name!r}")
     if suffix == ".mp4" and importlib.util.find_spec("imageio_ffmpeg") is None:
         raise UsageError(
-            "writing .mp4 needs the imageio-ffmpeg package (pip install imageio-ffmpeg); .gif works without it"
+            "writing .mp4 needs the imageio-ffmpeg package (pip install 'kuka-curriculum[video]'); "
+            ".gif works without it"
         )
 
 
