@@ -122,8 +122,8 @@ class StoredFit:
 class _Write:
     statements: Statements
     future: asyncio.Future[None] | None
-    on_commit: Callable[[], None] | None
-    on_abort: Callable[[], None] | None
+    on_commit: Callable[[], object] | None
+    on_abort: Callable[[], object] | None
     error: BaseException | None = field(default=None)
 
 
@@ -162,7 +162,9 @@ class Store:
         return [StoredTask(*row) for row in rows]
 
     def result_count(self, curriculum_id: int) -> int:
-        return self._db.execute("SELECT count(*) FROM results WHERE curriculum_id = ?", (curriculum_id,)).fetchone()[0]
+        row = self._db.execute("SELECT count(*) FROM results WHERE curriculum_id = ?", (curriculum_id,)).fetchone()
+        count: int = row[0]
+        return count
 
     def results(self, curriculum_id: int) -> Iterator[StoredResult]:
         """Accepted results in the order the teacher learned from them, with the tasks they answer."""
@@ -216,14 +218,14 @@ class Store:
     def write(
         self,
         statements: Statements,
-        on_commit: Callable[[], None] | None = None,
-        on_abort: Callable[[], None] | None = None,
+        on_commit: Callable[[], object] | None = None,
+        on_abort: Callable[[], object] | None = None,
     ) -> asyncio.Future[None]:
         """Queue statements for one atomic write; call from the event loop.
 
         The future resolves once they are committed, after ``on_commit`` ran, or fails with
         ``StoreError`` after ``on_abort`` ran. The callbacks run even when the caller stopped
-        awaiting, so bookkeeping never depends on the request surviving.
+        awaiting, so bookkeeping never depends on the request surviving; what they return is ignored.
         """
         if self._loop is None:
             raise RuntimeError("Store.write before Store.start")
@@ -276,6 +278,7 @@ class Store:
     @staticmethod
     def _complete(group: list[_Write]) -> None:
         for write in group:
+            outcome: Exception | None
             if write.error is None:
                 callback, outcome = write.on_commit, None
             else:

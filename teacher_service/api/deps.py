@@ -19,11 +19,13 @@ from teacher_service.metrics import ServiceMetrics
 
 
 async def get_registry(request: Request) -> CurriculumRegistry:
-    return request.app.state.registry
+    registry: CurriculumRegistry = request.app.state.registry
+    return registry
 
 
 async def get_metrics(request: Request) -> ServiceMetrics:
-    return request.app.state.metrics
+    metrics: ServiceMetrics = request.app.state.metrics
+    return metrics
 
 
 RegistryDep = Annotated[CurriculumRegistry, Depends(get_registry)]

@@ -19,7 +19,7 @@ import functools
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -131,7 +131,8 @@ class _NearestReward:
     def reward_near(self, point: np.ndarray) -> float:
         distance, reward = np.inf, np.nan
         if self._tree is not None:
-            distance, index = self._tree.query(point)
+            # One point, so scalars; the stubs also allow the arrays a batch of points would give.
+            distance, index = cast("tuple[float, np.intp]", self._tree.query(point))
             reward = self._tree_rewards[index]
         if self._recent:
             distances = np.linalg.norm(self._recent_points[: self._recent] - point, axis=1)
@@ -182,7 +183,8 @@ class _Sampler:
         component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
         normals = _standard_normals(normal_quantiles)
         offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], normals)
-        return self.task_means[component] + offsets
+        features: np.ndarray = self.task_means[component] + offsets
+        return features
 
 
 def _standard_normals(uniforms: np.ndarray) -> np.ndarray:
@@ -195,6 +197,7 @@ class AlpGmmTeacher(Teacher):
     """Absolute-learning-progress teacher over a Gaussian mixture (see the module docstring)."""
 
     kind = "alp-gmm"
+    params: AlpGmmParams
 
     def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed)

@@ -9,11 +9,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from common.task_space import Task, TaskSpace
 
-Params = TypeVar("Params")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+Params = TypeVar("Params", bound="DataclassInstance")
 
 
 def parse_params(kind: str, schema: type[Params], raw: Mapping[str, Any] | None) -> Params:
