@@ -42,7 +42,7 @@ class WorkerPool:
         options: dict[str, Any] = {}
         if self.name_prefix is not None:
             options["name"] = f"{self.name_prefix}-worker-{slot}-{incarnation}"
-        return RolloutWorker.options(**options).remote(self.settings, worker_seed)
+        return RolloutWorker.options(**options).remote(self.settings, worker_seed)  # type: ignore[attr-defined]  # ray types @ray.remote(...) as keeping the plain class
 
     def _replace(self, slot: int) -> None:
         ray.kill(self._workers[slot], no_restart=True)
@@ -50,7 +50,7 @@ class WorkerPool:
         self.replacements += 1
         self._workers[slot] = self._start(slot)
 
-    def _call_all(self, submit: Callable[[Any, int], ray.ObjectRef]) -> list[Any]:
+    def _call_all(self, submit: Callable[[Any, int], ray.ObjectRef[Any]]) -> list[Any]:
         """Run ``submit(worker, slot)`` on every slot, retrying a slot on a fresh actor when its actor dies."""
         results: list[Any] = [None] * len(self._workers)
         deaths = [0] * len(self._workers)
@@ -70,12 +70,12 @@ class WorkerPool:
                 pending[submit(self._workers[slot], slot)] = slot
         return results
 
-    def sample(self, snapshot: ray.ObjectRef | PolicySnapshot) -> list[TrajectoryBatch]:
+    def sample(self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot) -> list[TrajectoryBatch]:
         """One batch from every worker; pass a ``ray.put`` reference so the weights are shipped once."""
         return self._call_all(lambda worker, _: worker.sample.remote(snapshot))
 
     def evaluate(
-        self, snapshot: ray.ObjectRef | PolicySnapshot, task: Task, seeds: Sequence[int]
+        self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot, task: Task, seeds: Sequence[int]
     ) -> list[EpisodeStats]:
         """Play one deterministic episode per seed, the seeds shared out over the workers."""
         shares = [list(seeds[slot :: len(self._workers)]) for slot in range(len(self._workers))]

@@ -7,7 +7,7 @@ Episodes run across ``sample`` calls, so a batch boundary never cuts an episode 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import gymnasium as gym
 import numpy as np
@@ -30,12 +30,12 @@ class TaskSource(Protocol):
 class Sampler:
     """Owns a set of environments and their in-progress episodes."""
 
-    def __init__(self, envs: Sequence[gym.Env], tasks: TaskSource, seed: int) -> None:
+    def __init__(self, envs: Sequence[gym.Env[np.ndarray, np.ndarray]], tasks: TaskSource, seed: int) -> None:
         if not envs:
             raise ValueError("a sampler needs at least one environment")
         self.envs = list(envs)
         self.tasks = tasks
-        space = self.envs[0].action_space
+        space = cast(gym.spaces.Box, self.envs[0].action_space)  # actions are clipped into its bounds
         self._action_low, self._action_high = space.low, space.high
         num_envs = len(self.envs)
         self._episode_tasks: list[tuple[str | None, Task]] = [(None, {}) for _ in range(num_envs)]
@@ -115,11 +115,16 @@ class Sampler:
 
 
 def run_episodes(
-    env: gym.Env, policy: InferencePolicy, task: Task, seeds: Sequence[int], deterministic: bool = True
+    env: gym.Env[np.ndarray, np.ndarray],
+    policy: InferencePolicy,
+    task: Task,
+    seeds: Sequence[int],
+    deterministic: bool = True,
 ) -> list[EpisodeStats]:
     """Play one whole episode per seed on a fixed task (evaluation: nothing is reported anywhere)."""
     results = []
-    low, high = env.action_space.low, env.action_space.high
+    space = cast(gym.spaces.Box, env.action_space)  # actions are clipped into its bounds
+    low, high = space.low, space.high
     for seed in seeds:
         observation, info = env.reset(seed=int(seed), options={"task": task})
         total, length, done = 0.0, 0, False
