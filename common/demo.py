@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import cast
 
 import imageio.v3 as iio
+import numpy as np
 from tqdm import tqdm
 
 from common.kuka_env import KukaGraspEnv
@@ -49,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
             frames.append(env.render())
     env.close()
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(args.out, frames, duration=FRAME_MS, loop=0)
+    # An rgb_array environment renders a frame every time; render() is None only without a render mode.
+    iio.imwrite(args.out, cast(list[np.ndarray], frames), duration=FRAME_MS, loop=0)
     print(args.out)
     return 0

@@ -65,7 +65,7 @@ CAMERA_YAW = 55.0
 CAMERA_PITCH = -27.0
 
 
-class KukaGraspEnv(gymnasium.Env):
+class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     """Grasp a block from a tray with a KUKA iiwa arm, at a difficulty set by a curriculum task.
 
     Observation (9): the gripper's world position and Euler angles, then the block's x, y and yaw
@@ -75,6 +75,8 @@ class KukaGraspEnv(gymnasium.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 240}  # one step is 1/240 s of physics
+    observation_space: spaces.Box
+    action_space: spaces.Box
     angle_indices = (3, 4, 5, 8)
     """Observation entries that are angles in [-pi, pi]: the gripper's roll, pitch and yaw, and the
     block's yaw in the gripper's frame. The roll of a gripper pointing down sits at +-pi."""
@@ -171,7 +173,7 @@ class KukaGraspEnv(gymnasium.Env):
         truncated = not terminated and self._steps >= self.max_steps
         return observation, reward, terminated, truncated, {"is_success": success}
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> np.ndarray | None:  # type: ignore[override]  # gymnasium types it with an unbound TypeVar
         if self.render_mode != "rgb_array":
             return None
         client = self._client
@@ -259,7 +261,8 @@ class KukaGraspEnv(gymnasium.Env):
 
     def _block_to_end_effector_distance(self) -> float:
         points = self._closest_points(self._block, self._arm.uid, 1000.0, -1, END_EFFECTOR_LINK)
-        return min(point[8] for point in points)
+        distance: float = min(point[8] for point in points)
+        return distance
 
     def _observe(self) -> tuple[np.ndarray, float]:
         """The observation, and the block's height (for the success test, read here to save a call)."""

@@ -94,7 +94,8 @@ class ActorCritic(nn.Module):
         self.actor_log_std = nn.Parameter(torch.full((spec.action_dim,), float(spec.init_log_std)))
 
     def value(self, observations: torch.Tensor) -> torch.Tensor:
-        return self.critic(observations).squeeze(-1)
+        values: torch.Tensor = self.critic(observations)
+        return values.squeeze(-1)
 
     def evaluate(
         self, observations: torch.Tensor, actions: torch.Tensor

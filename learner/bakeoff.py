@@ -173,7 +173,7 @@ def _logged_steps(run: Run) -> int:
     return int(records[-1]["step"]) if records else 0
 
 
-def train_run(run: Run, command: list[str], progress: tqdm, steps_before: int) -> bool:
+def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_before: int) -> bool:
     """Run one training child to its end; False when it was interrupted (Ctrl-C).
 
     While it runs this process ignores Ctrl-C, which reaches the child too: the child finishes its
@@ -207,6 +207,7 @@ def train_run(run: Run, command: list[str], progress: tqdm, steps_before: int) -
 def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None) -> EvaluationResult:
     """The final policy on the hardest task, cached with the checkpoint it came from."""
     checkpoint = latest_checkpoint(run.directory)
+    assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
     cache = run.directory / EVALUATION_FILE
     if cache.exists():
         cached = json.loads(cache.read_text(encoding="utf-8"))

@@ -8,7 +8,10 @@ them and ``--resume`` can rebuild the run exactly.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from common.schemas import TeacherKind
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,7 @@ class PPOConfig:
         _require(self.torch_threads >= 1, "torch_threads must be at least 1")
 
 
-TEACHERS = ("alp-gmm", "manual", "random", "fixed")
+TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
     "alp-gmm": {"reward_range": [-5.0, 10.0]},
@@ -79,7 +82,7 @@ return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    teacher: str = "alp-gmm"
+    teacher: TeacherKind = "alp-gmm"
     """Curriculum teacher: alp-gmm, manual (the book's lesson plan), random (uniform) or fixed (hardest task)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""

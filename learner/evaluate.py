@@ -19,7 +19,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -187,6 +187,7 @@ def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int) 
 
 
 def _play_episode(seed: int) -> EpisodeStats:
+    assert _worker is not None, "the pool runs _start_worker in each process before any episode"
     env, policy, task = _worker
     return run_episodes(env, policy, task, [seed])[0]
 
@@ -232,7 +233,8 @@ def evaluate_policy(
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
-    return EvaluationResult(task=task, seed=seed, episodes=tuple(results))
+    # Every index was filled above: the loop or the pool answered each seed.
+    return EvaluationResult(task=task, seed=seed, episodes=tuple(cast(list[EpisodeStats], results)))
 
 
 def evaluate_checkpoint(

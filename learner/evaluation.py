@@ -21,7 +21,7 @@ def evaluation_seeds(episodes: int) -> list[int]:
 
 
 def evaluate_on_hardest_task(
-    pool: WorkerPool, snapshot: ray.ObjectRef | PolicySnapshot, episodes: int
+    pool: WorkerPool, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot, episodes: int
 ) -> dict[str, float]:
     results = pool.evaluate(snapshot, KUKA_TASK_SPACE.hardest(), evaluation_seeds(episodes))
     return {

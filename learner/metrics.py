@@ -27,7 +27,7 @@ class MetricsLog:
     def write(self, step: int, values: dict[str, float]) -> None:
         """One record per call. NaN (say, no episode finished this iteration) becomes null in JSON
         and is left out of TensorBoard."""
-        record = {"step": step, "time": time.time()}
+        record: dict[str, float | None] = {"step": step, "time": time.time()}
         record.update({name: (None if math.isnan(value) else value) for name, value in values.items()})
         self._file.write(json.dumps(record) + "\n")
         self._file.flush()

@@ -107,7 +107,7 @@ class PPOLearner:
 
                 loss = policy_loss - cfg.entropy_coef * entropy.mean() + cfg.value_coef * value_loss
                 self.optimizer.zero_grad()
-                loss.backward()
+                loss.backward()  # type: ignore[no-untyped-call]  # torch leaves Tensor.backward unannotated
                 nn.utils.clip_grad_norm_(self.network.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
 
@@ -142,7 +142,8 @@ class PPOLearner:
         self.network.load_state_dict(state["network"])
         self.optimizer.load_state_dict(state["optimizer"])
         saved = state["normalizer"]
-        self.normalizer.load_state(NormalizerState(**{name: np.asarray(value) for name, value in saved.items()}))
+        restored = {name: np.asarray(value) for name, value in saved.items()}
+        self.normalizer.load_state(NormalizerState(**restored))  # type: ignore[arg-type]  # count: a 0-d array, used as a float
         self.shuffle.set_state(state["shuffle_rng"])
         self.version = int(state["version"])
 

@@ -22,7 +22,8 @@ from tqdm import tqdm
 from common.kuka_env import KukaGraspEnv
 from common.policy import InferencePolicy, PolicySnapshot
 from common.task_space import KUKA_TASK_SPACE, Task
-from learner.evaluate import TASK_HELP, UsageError, policy_snapshot, positive_int, read_checkpoint, task_argument
+from learner.arguments import positive_int
+from learner.evaluate import TASK_HELP, UsageError, policy_snapshot, read_checkpoint, task_argument
 
 STEPS_PER_FRAME = 8
 """A step is 1/240 s of physics: one frame in eight plays at real speed (30 frames per second)."""
@@ -56,6 +57,7 @@ def label_frame(
     band = Image.new("RGBA", image.size, (0, 0, 0, 0))
     draw = ImageDraw.Draw(band)
     font = ImageFont.load_default(size=max(10, image.height // 18))
+    assert isinstance(font, ImageFont.FreeTypeFont), "a sized default font needs Pillow built with FreeType"
     line_height = font.size + 4
     draw.rectangle((0, 0, image.width, 2 * line_height + 8), fill=BAND_COLOUR)
     draw.text((6, 4), f"episode {episode}/{episodes}   step {step}", font=font, fill=TEXT_COLOUR)
@@ -65,6 +67,13 @@ def label_frame(
         width = draw.textlength(outcome, font=font)
         draw.text((image.width - width - 6, 4 + line_height), outcome, font=font, fill=colour)
     return np.asarray(Image.alpha_composite(image, band).convert("RGB"))
+
+
+def camera_frame(env: KukaGraspEnv) -> np.ndarray:
+    """``env.render()`` for an environment made with ``render_mode="rgb_array"``, which always renders."""
+    frame = env.render()
+    assert frame is not None, "the environment was made without render_mode='rgb_array'"
+    return frame
 
 
 def film_episodes(
@@ -87,7 +96,7 @@ def film_episodes(
         for episode in tqdm(range(1, episodes + 1), desc="filming", unit="episode", disable=not progress):
             observation, _ = env.reset(seed=seed + episode - 1, options={"task": task})
             step, episode_return, done, success = 0, 0.0, False, None
-            frames.append(label_frame(env.render(), episode, episodes, step, episode_return, success))
+            frames.append(label_frame(camera_frame(env), episode, episodes, step, episode_return, success))
             while not done:
                 action, _, _ = policy.act(observation[None], deterministic=True)
                 observation, reward, terminated, truncated, info = env.step(np.clip(action[0], low, high))
@@ -97,7 +106,7 @@ def film_episodes(
                 if done:
                     success = bool(info["is_success"])
                 if done or step % STEPS_PER_FRAME == 0:
-                    frames.append(label_frame(env.render(), episode, episodes, step, episode_return, success))
+                    frames.append(label_frame(camera_frame(env), episode, episodes, step, episode_return, success))
             frames.extend([frames[-1]] * hold)
     finally:
         env.close()

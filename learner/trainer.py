@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -18,6 +18,7 @@ import numpy as np
 import ray
 import torch
 
+from common.policy import PolicySnapshot
 from common.trajectory import EpisodeStats
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
@@ -113,7 +114,9 @@ class Trainer:
     def save(self) -> Path:
         return save_checkpoint(self.run_dir, self.learner.state_dict(), self.counters, self.config)
 
-    def _iterate(self, pool: WorkerPool, snapshot_ref: ray.ObjectRef) -> tuple[ray.ObjectRef, IterationReport]:
+    def _iterate(
+        self, pool: WorkerPool, snapshot_ref: ray.ObjectRef[PolicySnapshot]
+    ) -> tuple[ray.ObjectRef[PolicySnapshot], IterationReport]:
         started = time.perf_counter()
         replacements_before = pool.replacements
         batches = pool.sample(snapshot_ref)
@@ -158,6 +161,6 @@ class Trainer:
         return snapshot_ref, report
 
 
-def _mean(values) -> float:
+def _mean(values: Iterable[float]) -> float:
     values = list(values)
     return float(np.mean(values)) if values else float("nan")
