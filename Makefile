@@ -25,4 +25,4 @@ test: check
 	$(VENV)/bin/pytest
 
 clean:
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
