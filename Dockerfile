@@ -1,32 +1,61 @@
-# syntax=docker/dockerfile:1
-# One image for every role of the stack: teacher service, Ray head, Ray workers, learner.
-# CPU torch by default. For a CUDA image, point TORCH_INDEX_URL at the matching PyTorch wheel index:
-#   docker build --build-arg TORCH_INDEX_URL=https://download.pytorch.org/whl/cu126 -t kuka-curriculum .
-FROM python:3.11-slim
+# One image for every role of the stack: teacher service, Ray head, Ray workers, learner, TensorBoard.
+#
+# It builds with the classic builder (Debian's docker-compose 1.29, DOCKER_BUILDKIT=0) and with BuildKit
+# alike: no `# syntax=` line (BuildKit would fetch that frontend from Docker Hub) and no `RUN --mount`.
+#
+# Where everything comes from is a build argument, so the image also builds air-gapped (docs/deployment.md):
+#   BASE_IMAGE       any image with Python 3.10+ and its venv module as `python3` (default: the slim Python image)
+#   TORCH_INDEX_URL  the PyTorch wheel index: CPU by default, e.g. .../whl/cu126 for a CUDA build
+#   PIP_INDEX_URL    the index for every other wheel (default PyPI)
+#   PIP_FIND_LINKS   a wheelhouse URL (a directory listing); with PIP_NO_INDEX=1 it is the only source
+ARG BASE_IMAGE=python:3.11-slim
+FROM ${BASE_IMAGE}
 
 ARG TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu
+ARG PIP_INDEX_URL
+ARG PIP_FIND_LINKS
+ARG PIP_NO_INDEX
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
-    PIP_ROOT_USER_ACTION=ignore
+    PIP_NO_CACHE_DIR=1 \
+    PIP_ROOT_USER_ACTION=ignore \
+    VIRTUAL_ENV=/opt/venv \
+    PATH=/opt/venv/bin:$PATH
+
+# A virtual environment works the same on any base, including a Debian one whose system Python
+# refuses pip installs (PEP 668).
+RUN python3 -m venv /opt/venv
 
 WORKDIR /app
 
-# torch comes first, from its own index: the project install below then finds it satisfied
-# instead of pulling PyPI's multi-GB CUDA build into the CPU image.
+# Dependencies before the code, each in its own layer, so that a change to the code rebuilds in seconds.
+# torch first, from its own index: the install below then finds it satisfied instead of pulling
+# PyPI's multi-GB CUDA build into the CPU image.
+# Its C++ headers and its own test suite (150 MB) serve only extension builds and torch's developers.
 COPY constraints.txt ./
-RUN --mount=type=cache,target=/root/.cache/pip \
-    pip install --index-url "$TORCH_INDEX_URL" --constraint constraints.txt torch
+RUN pip install --index-url "$TORCH_INDEX_URL" --constraint constraints.txt torch \
+    && rm -rf /opt/venv/lib/python3*/site-packages/torch/include /opt/venv/lib/python3*/site-packages/torch/test
 
-COPY pyproject.toml README.md ./
+# The project's core dependencies as pyproject.toml lists them (no extras: no dev tools, no ffmpeg);
+# ray[default] adds the dashboard the head publishes, and setuptools is the project's build backend
+# (installed here, so the project's own install needs no index). The packages' bundled test suites
+# go in the same layer, or they would still weigh on the image.
+COPY pyproject.toml ./
+RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
+        > /tmp/requirements.txt \
+    && pip install --constraint constraints.txt --requirement /tmp/requirements.txt "ray[default]" "setuptools>=68" \
+    && rm /tmp/requirements.txt \
+    && find /opt/venv/lib -depth -type d -name tests -path '*/site-packages/*' -exec rm -rf {} +
+
+COPY README.md ./
 COPY common ./common
 COPY teacher_service ./teacher_service
 COPY rollout_worker ./rollout_worker
 COPY learner ./learner
-# ray[default] adds the dashboard that the head publishes.
-RUN --mount=type=cache,target=/root/.cache/pip \
-    pip install --constraint constraints.txt . "ray[default]"
+RUN pip install --no-deps --no-build-isolation . \
+    && rm -rf build ./*.egg-info
 
 # Run unprivileged. /data (teacher database) and /runs (checkpoints, TensorBoard) exist here
 # already owned by that user, so fresh named volumes mounted on them start out writable.
