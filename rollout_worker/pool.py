@@ -39,7 +39,8 @@ class WorkerPool:
         """Each slot and incarnation gets its own seed stream, so a replacement never replays its predecessor."""
         incarnation = self._incarnations[slot]
         worker_seed = int(np.random.SeedSequence([self.seed, slot, incarnation]).generate_state(1)[0])
-        options: dict[str, Any] = {}
+        # Spread over the nodes: each actor is CPU-bound, and a worker machine lost takes fewer of them with it.
+        options: dict[str, Any] = {"scheduling_strategy": "SPREAD"}
         if self.name_prefix is not None:
             options["name"] = f"{self.name_prefix}-worker-{slot}-{incarnation}"
         return RolloutWorker.options(**options).remote(self.settings, worker_seed)  # type: ignore[attr-defined]  # ray types @ray.remote(...) as keeping the plain class
