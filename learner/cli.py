@@ -28,6 +28,9 @@ TEACHER_CONNECT_TIMEOUT_S = 10.0
 STATUS_TIMEOUT_S = 1.0
 TOKEN_VARIABLE = "KC_TEACHER_TOKEN"
 """The teacher service's bearer token, read from the environment (never a flag: flags show in ``ps``)."""
+PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
+"""The teacher's address as a person's browser reaches it, when it differs from ``--teacher-url``
+(in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
 RAY_NAMESPACE = "kuka-curriculum"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint."""
@@ -86,6 +89,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(for a supervisor that restarts the learner, such as Docker Compose)",
     )
     where.add_argument("--teacher-url", help="a running teacher service (default: start one for this run)")
+    where.add_argument(
+        "--public-url",
+        help=f"the teacher's address in the printed dashboard link, as your browser reaches it "
+        f"(default: ${PUBLIC_URL_VARIABLE}, else the teacher's own URL)",
+    )
     where.add_argument("--ray-address", help="a running Ray cluster, host:port (default: start a local one)")
 
 
@@ -158,8 +166,9 @@ def _train(args: argparse.Namespace) -> int:
         name = curriculum_name(run_dir)
         token = os.environ.get(TOKEN_VARIABLE) or None
         _register_curriculum(teacher_url, name, config, token)
+        public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         _connect_ray(args.ray_address, config.workers, stack)
-        return _run_training(config, run_dir, teacher_url, name, token, checkpoint)
+        return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
 
 
 def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str:
@@ -229,7 +238,13 @@ def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack)
 
 
 def _run_training(
-    config: TrainConfig, run_dir: Path, teacher_url: str, name: str, token: str | None, checkpoint: Any
+    config: TrainConfig,
+    run_dir: Path,
+    teacher_url: str,
+    dashboard_url: str,
+    name: str,
+    token: str | None,
+    checkpoint: Any,
 ) -> int:
     from tqdm import tqdm
 
@@ -240,7 +255,7 @@ def _run_training(
         config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint, actor_name_prefix=name
     )
     print(f"run directory: {run_dir}")
-    print(f"dashboard:     {teacher_url}/curricula/{name}")
+    print(f"dashboard:     {dashboard_url}")
     start = trainer.counters.steps
     if checkpoint is not None:
         print(f"resuming from {checkpoint.path} at step {start:_}")

@@ -1,6 +1,7 @@
-"""The Docker deployment, checked without a Docker engine (none runs on these machines).
+"""The Docker deployment's files, checked in seconds without a Docker engine.
 
-Nothing is built or started here. What is checked: Debian's ``docker-compose config`` accepts
+Nothing is built or started here (``test_docker_stack.py`` builds the image and runs the stack);
+a mistake in a file is named here precisely instead. What is checked: Debian's ``docker-compose config`` accepts
 ``docker-compose.yml`` with ``.env.example``; every service's command is a real invocation of the
 program it runs (our own argparse sub-commands, Ray's click commands, TensorBoard's flags); ports,
 volumes and environment agree with each other and with the teacher's ``Settings``; and the
@@ -29,6 +30,7 @@ import pytest
 import yaml
 
 from common.cli import COMMANDS
+from learner.cli import PUBLIC_URL_VARIABLE
 from learner.cli import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from teacher_service.core.config import Settings
 
@@ -88,6 +90,11 @@ def dockerfile_instructions() -> list[tuple[str, str]]:
 
 def dockerfile_values(keyword: str) -> list[str]:
     return [arguments for instruction, arguments in dockerfile_instructions() if instruction == keyword]
+
+
+def dockerfile_argument_defaults() -> dict[str, str]:
+    """``ARG NAME=default`` lines; an ``ARG NAME`` without one is left unset unless the build sets it."""
+    return dict(argument.split("=", 1) for argument in dockerfile_values("ARG") if "=" in argument)
 
 
 def service_commands(service: dict[str, Any]) -> list[list[str]]:
@@ -249,6 +256,11 @@ def test_published_ports_listen_on_loopback_only(services: dict[str, dict[str, A
             assert host_ip == "127.0.0.1", f"{name} publishes a port on {host_ip or 'every interface'}"
 
 
+def test_learner_links_the_dashboard_where_the_host_reaches_the_teacher(services: dict[str, dict[str, Any]]) -> None:
+    [(host_ip, host_port, _)] = ports_of(services["teacher"])
+    assert environment_of(services["learner"])[PUBLIC_URL_VARIABLE] == f"http://{host_ip}:{host_port}"
+
+
 def test_teacher_is_reached_where_it_listens(services: dict[str, dict[str, Any]]) -> None:
     teacher = services["teacher"]
     args = parse_kuka_curriculum(command_of(teacher, "kuka-curriculum", "serve"))
@@ -337,14 +349,14 @@ def test_environment_names_are_read_by_the_programs(
     services: dict[str, dict[str, Any]], env_example: dict[str, str]
 ) -> None:
     prefix = Settings.model_config["env_prefix"]
-    known = {prefix + field.upper() for field in Settings.model_fields}
+    known = {prefix + field.upper() for field in Settings.model_fields} | {PUBLIC_URL_VARIABLE}
     assert LEARNER_TOKEN_VARIABLE in known, (
         "the learner must send the token from the variable the teacher reads it from"
     )
     for name, service in services.items():
         for variable in environment_of(service):
             if variable.startswith(prefix):
-                assert variable in known, f"{name} sets {variable}, which no Settings field reads"
+                assert variable in known, f"{name} sets {variable}, which neither the teacher nor the learner reads"
 
     holders = {name for name, service in services.items() if LEARNER_TOKEN_VARIABLE in environment_of(service)}
     assert holders == TOKEN_HOLDERS
@@ -411,9 +423,9 @@ def test_image_starts_the_console_script(capsys: pytest.CaptureFixture[str]) -> 
 def test_torch_comes_from_the_index_the_build_argument_names(
     services: dict[str, dict[str, Any]], env_example: dict[str, str]
 ) -> None:
-    default_index = dict(argument.split("=", 1) for argument in dockerfile_values("ARG"))["TORCH_INDEX_URL"]
+    default_index = dockerfile_argument_defaults()["TORCH_INDEX_URL"]
     assert default_index.endswith("/whl/cpu")
-    torch_install = next(run for run in dockerfile_values("RUN") if run.split()[-1] == "torch")
+    torch_install = next(run for run in dockerfile_values("RUN") if "constraints.txt torch" in run)
     assert '--index-url "$TORCH_INDEX_URL"' in torch_install and "--constraint constraints.txt" in torch_install
 
     for name, service in services.items():
