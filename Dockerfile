@@ -4,7 +4,7 @@
 # alike: no `# syntax=` line (BuildKit would fetch that frontend from Docker Hub) and no `RUN --mount`.
 #
 # Where everything comes from is a build argument, so the image also builds air-gapped (docs/deployment.md):
-#   BASE_IMAGE       any image with Python 3.10+ and its venv module as `python3` (default: the slim Python image)
+#   BASE_IMAGE       any image with Python 3.11+ and its venv module as `python3` (default: the slim Python image)
 #   TORCH_INDEX_URL  the PyTorch wheel index: CPU by default, e.g. .../whl/cu126 for a CUDA build
 #   PIP_INDEX_URL    the index for every other wheel (default PyPI)
 #   PIP_FIND_LINKS   a wheelhouse URL (a directory listing); with PIP_NO_INDEX=1 it is the only source

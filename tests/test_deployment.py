@@ -420,17 +420,22 @@ def test_image_starts_the_console_script(capsys: pytest.CaptureFixture[str]) -> 
     assert all(name in usage for name in COMMANDS), "a bare `docker run` should list the sub-commands"
 
 
-def test_torch_comes_from_the_index_the_build_argument_names(
-    services: dict[str, dict[str, Any]], env_example: dict[str, str]
-) -> None:
+def test_torch_comes_from_the_index_the_build_argument_names() -> None:
     default_index = dockerfile_argument_defaults()["TORCH_INDEX_URL"]
     assert default_index.endswith("/whl/cpu")
     torch_install = next(run for run in dockerfile_values("RUN") if "constraints.txt torch" in run)
     assert '--index-url "$TORCH_INDEX_URL"' in torch_install and "--constraint constraints.txt" in torch_install
 
+
+def test_build_arguments_in_env_example_match_the_dockerfile(
+    services: dict[str, dict[str, Any]], env_example: dict[str, str]
+) -> None:
+    dockerfile_defaults = dockerfile_argument_defaults()
     for name, service in services.items():
-        assert service["build"]["args"]["TORCH_INDEX_URL"] == env_example["TORCH_INDEX_URL"], name
-    assert env_example["TORCH_INDEX_URL"] == default_index
+        for argument, value in service["build"]["args"].items():
+            assert value == env_example[argument], f"{name}: build argument {argument} is not set from .env"
+            assert value == dockerfile_defaults.get(argument, value), f"{argument}: .env.example and Dockerfile differ"
+    assert {"BASE_IMAGE", "TORCH_INDEX_URL"} <= set(dockerfile_defaults)
 
 
 def test_image_exposes_every_published_container_port(services: dict[str, dict[str, Any]]) -> None:
