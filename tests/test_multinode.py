@@ -214,6 +214,8 @@ def test_training_spreads_rollout_actors_over_ray_nodes(
 ) -> None:
     head_address, head_temp_dir = ray_head
     run_dir = workspace / "run"
+    # The address a person's browser would use, unlike the one the learner is given.
+    public_url = teacher_url.replace("127.0.0.1", "localhost")
     train = subprocess.run(
         [
             str(BIN / "kuka-curriculum"),
@@ -228,6 +230,7 @@ def test_training_spreads_rollout_actors_over_ray_nodes(
             "--seed=0",
             f"--run-dir={run_dir}",
             f"--teacher-url={teacher_url}",
+            f"--public-url={public_url}",
             f"--ray-address={head_address}",
         ],
         env=process_environment(TOKEN),
@@ -248,3 +251,7 @@ def test_training_spreads_rollout_actors_over_ray_nodes(
 
     [curriculum] = httpx.get(f"{teacher_url}{API_PREFIX}/curricula", timeout=5.0).json()["curricula"]
     assert curriculum["counters"]["results_received"] > 0, "the teacher heard of no finished episode"
+
+    dashboard = f"{public_url}/curricula/{curriculum['name']}"
+    assert f"dashboard:     {dashboard}\n" in train.stdout
+    assert httpx.get(dashboard, timeout=5.0).status_code == 200
