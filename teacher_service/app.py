@@ -14,6 +14,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 from fastapi.exceptions import RequestValidationError
 
+from teacher_service.api.docs import add_offline_docs
 from teacher_service.api.errors import validation_error_handler
 from teacher_service.api.routes import curricula, health
 from teacher_service.core.config import Settings
@@ -63,6 +64,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="1.0.0",
         lifespan=lifespan,
         max_body_size=settings.max_body_bytes,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.metrics = service_metrics
@@ -70,5 +73,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(curricula.router)
     app.include_router(dashboard_router)
+    add_offline_docs(app)
     app.add_middleware(MetricsMiddleware, metrics=service_metrics)
     return app
