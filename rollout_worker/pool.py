@@ -1,13 +1,15 @@
 """A fixed-size set of rollout actors that survives the death of any of them.
 
 A dead actor (crashed, killed, node lost) is replaced by a fresh one with a new seed stream and
-asked again for what the dead one owed, so every call returns a full set of results.
+asked again for what the dead one owed, so every call returns a full set of results. Calls can be
+left in flight (``start_sampling``, ``start_evaluation``) while the learner does other work; an
+actor runs its calls in the order they were made.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 import ray
@@ -20,6 +22,48 @@ from rollout_worker.actor import RolloutWorker, WorkerSettings
 
 MAX_CONSECUTIVE_DEATHS = 3
 """Replacements for one slot within one call before giving up: an actor that dies on every start is a bug."""
+
+Result = TypeVar("Result")
+Submit = Callable[[Any, int], "ray.ObjectRef[Any]"]
+
+
+class InFlight(Generic[Result]):
+    """One call on every slot of a pool, made but not yet collected."""
+
+    def __init__(self, pool: WorkerPool, submit: Submit) -> None:
+        self._pool = pool
+        self._submit = submit
+        self._results: list[Any] = [None] * pool.size
+        self._deaths = [0] * pool.size
+        self._pending: dict[ray.ObjectRef[Any], tuple[int, Any]] = {}
+        for slot in range(pool.size):
+            self._send(slot)
+
+    def _send(self, slot: int) -> None:
+        worker = self._pool.worker(slot)
+        self._pending[self._submit(worker, slot)] = (slot, worker)
+
+    def done(self) -> bool:
+        """Whether every slot has answered (a dead actor's answer is its death), without waiting."""
+        ready, _ = ray.wait(list(self._pending), num_returns=len(self._pending), timeout=0)
+        return len(ready) == len(self._pending)
+
+    def result(self) -> list[Result]:
+        """Every slot's result, in slot order; waits, and retries a slot on a fresh actor when its actor dies."""
+        while self._pending:
+            [ready], _ = ray.wait(list(self._pending), num_returns=1)
+            slot, worker = self._pending.pop(ready)
+            try:
+                self._results[slot] = ray.get(ready)
+            except RayActorError as error:
+                self._deaths[slot] += 1
+                if self._deaths[slot] > MAX_CONSECUTIVE_DEATHS:
+                    raise RuntimeError(
+                        f"rollout worker {slot} died {self._deaths[slot]} times in a row; last error: {error}"
+                    ) from error
+                self._pool.replace_if_current(slot, worker)
+                self._send(slot)
+        return self._results
 
 
 class WorkerPool:
@@ -35,6 +79,13 @@ class WorkerPool:
         self._incarnations = [0] * count
         self._workers = [self._start(slot) for slot in range(count)]
 
+    @property
+    def size(self) -> int:
+        return len(self._workers)
+
+    def worker(self, slot: int) -> Any:
+        return self._workers[slot]
+
     def _start(self, slot: int) -> Any:
         """Each slot and incarnation gets its own seed stream, so a replacement never replays its predecessor."""
         incarnation = self._incarnations[slot]
@@ -45,43 +96,33 @@ class WorkerPool:
             options["name"] = f"{self.name_prefix}-worker-{slot}-{incarnation}"
         return RolloutWorker.options(**options).remote(self.settings, worker_seed)  # type: ignore[attr-defined]  # ray types @ray.remote(...) as keeping the plain class
 
-    def _replace(self, slot: int) -> None:
-        ray.kill(self._workers[slot], no_restart=True)
+    def replace_if_current(self, slot: int, dead: Any) -> None:
+        """Replace the slot's actor, unless another call in flight already replaced this dead one."""
+        if self._workers[slot] is not dead:
+            return
+        ray.kill(dead, no_restart=True)
         self._incarnations[slot] += 1
         self.replacements += 1
         self._workers[slot] = self._start(slot)
 
-    def _call_all(self, submit: Callable[[Any, int], ray.ObjectRef[Any]]) -> list[Any]:
-        """Run ``submit(worker, slot)`` on every slot, retrying a slot on a fresh actor when its actor dies."""
-        results: list[Any] = [None] * len(self._workers)
-        deaths = [0] * len(self._workers)
-        pending = {submit(worker, slot): slot for slot, worker in enumerate(self._workers)}
-        while pending:
-            [ready], _ = ray.wait(list(pending), num_returns=1)
-            slot = pending.pop(ready)
-            try:
-                results[slot] = ray.get(ready)
-            except RayActorError as error:
-                deaths[slot] += 1
-                if deaths[slot] > MAX_CONSECUTIVE_DEATHS:
-                    raise RuntimeError(
-                        f"rollout worker {slot} died {deaths[slot]} times in a row; last error: {error}"
-                    ) from error
-                self._replace(slot)
-                pending[submit(self._workers[slot], slot)] = slot
-        return results
+    def start_sampling(self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot) -> InFlight[TrajectoryBatch]:
+        """One batch from every worker; pass a ``ray.put`` reference so the weights are shipped once."""
+        return InFlight(self, lambda worker, _: worker.sample.remote(snapshot))
 
     def sample(self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot) -> list[TrajectoryBatch]:
-        """One batch from every worker; pass a ``ray.put`` reference so the weights are shipped once."""
-        return self._call_all(lambda worker, _: worker.sample.remote(snapshot))
+        return self.start_sampling(snapshot).result()
+
+    def start_evaluation(
+        self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot, task: Task, seeds: Sequence[int]
+    ) -> InFlight[list[EpisodeStats]]:
+        """One deterministic episode per seed, the seeds shared out over the workers."""
+        shares = [list(seeds[slot :: self.size]) for slot in range(self.size)]
+        return InFlight(self, lambda worker, slot: worker.evaluate.remote(snapshot, task, shares[slot]))
 
     def evaluate(
         self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot, task: Task, seeds: Sequence[int]
     ) -> list[EpisodeStats]:
-        """Play one deterministic episode per seed, the seeds shared out over the workers."""
-        shares = [list(seeds[slot :: len(self._workers)]) for slot in range(len(self._workers))]
-        results = self._call_all(lambda worker, slot: worker.evaluate.remote(snapshot, task, shares[slot]))
-        return [episode for share in results for episode in share]
+        return [episode for share in self.start_evaluation(snapshot, task, seeds).result() for episode in share]
 
     def close(self, timeout_s: float = 30.0) -> None:
         """Let every worker deliver its buffered episode results, then stop it."""
