@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from learner.arguments import non_negative_int, positive_int
-from learner.config import TEACHERS, TrainConfig
+from learner.config import LOOPS, TEACHERS, TrainConfig
 
 DEFAULTS = TrainConfig()
 RAY_CONNECT_TIMEOUT_S = 5.0
@@ -74,6 +74,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
+    run.add_argument(
+        "--loop",
+        choices=LOOPS,
+        help="async: workers sample while the learner updates, one update behind; sync: strictly on-policy, "
+        f"evaluations pause training (default {DEFAULTS.loop})",
+    )
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
     resume = where.add_mutually_exclusive_group()
@@ -107,6 +113,7 @@ _RUN_SETTINGS = (
     "checkpoint_every",
     "eval_every",
     "eval_episodes",
+    "loop",
 )
 """``TrainConfig`` fields settable by the flag of the same name."""
 

@@ -8,7 +8,7 @@ them and ``--resume`` can rebuild the run exactly.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from common.schemas import TeacherKind
@@ -71,6 +71,7 @@ class PPOConfig:
 
 
 TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed")
+LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
     "alp-gmm": {"reward_range": [-5.0, 10.0]},
@@ -100,6 +101,8 @@ class TrainConfig:
     """Iterations between evaluations on the hardest task (0 = never); 25 keeps their cost near 5%."""
     eval_episodes: int = 10
     """Evaluation episodes, one per fixed seed, shared out over the workers."""
+    loop: Literal["async", "sync"] = "async"
+    """async: workers sample the next batch, one update behind, while the learner updates; sync: on-policy, paused."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """Algorithm hyperparameters."""
 
@@ -112,6 +115,7 @@ class TrainConfig:
         _require(self.checkpoint_every >= 1, "checkpoint_every must be at least 1")
         _require(self.eval_every >= 0, "eval_every must be 0 (never) or more")
         _require(self.eval_episodes >= 1, "eval_episodes must be at least 1")
+        _require(self.loop in LOOPS, f"loop must be one of {', '.join(LOOPS)}, got {self.loop!r}")
 
     @property
     def teacher_params(self) -> dict[str, Any]:
@@ -130,6 +134,8 @@ class TrainConfig:
         known = {f.name for f in fields(cls)}
         values = {key: value for key, value in data.items() if key in known and key != "ppo"}
         ppo = dict(data.get("ppo", {}))
+        # Runs from before ``loop`` existed were synchronous, and resume as they started.
+        values.setdefault("loop", "sync")
         # Checkpoints from before ``angle_features`` existed were trained on raw angles.
         ppo.setdefault("angle_features", False)
         if "hidden_sizes" in ppo:

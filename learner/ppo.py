@@ -59,14 +59,21 @@ class PPOLearner:
     def snapshot(self) -> PolicySnapshot:
         return PolicySnapshot.capture(self.network, self.normalizer, self.version)
 
-    def update(self, batches: Sequence[TrajectoryBatch], progress: float = 0.0) -> dict[str, float]:
-        """One PPO update on batches collected with the current snapshot.
+    def update(
+        self, batches: Sequence[TrajectoryBatch], progress: float = 0.0, max_policy_lag: int = 0
+    ) -> dict[str, float]:
+        """One PPO update on batches collected with the current snapshot, or one at most ``max_policy_lag``
+        updates older: the ratio is taken against the log-probabilities of the policy that acted.
 
         ``progress`` in [0, 1] is the share of the step budget already spent (learning-rate annealing).
         """
-        stale = sorted({batch.policy_version for batch in batches} - {self.version})
+        accepted = range(self.version - max_policy_lag, self.version + 1)
+        stale = sorted({batch.policy_version for batch in batches if batch.policy_version not in accepted})
         if stale:
-            raise ValueError(f"PPO is on-policy: batches of policy version(s) {stale}, learner at {self.version}")
+            raise ValueError(
+                f"PPO is near on-policy: batches of policy version(s) {stale}, learner at {self.version}, "
+                f"at most {max_policy_lag} behind accepted"
+            )
         cfg = self.config
         learning_rate = cfg.learning_rate * (1.0 - min(max(progress, 0.0), 1.0)) if cfg.anneal_lr else cfg.learning_rate
         for group in self.optimizer.param_groups:

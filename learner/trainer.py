@@ -1,9 +1,19 @@
 """The learner's loop: pull a batch from every worker, update, broadcast the new weights.
 
-Synchronous on purpose: every batch is collected with the weights the update starts from, so PPO
-stays on-policy. The weights travel through Ray's object store once per iteration (``ray.put``)
-and every worker reads them from there. Stopping (the budget is spent, or ``request_stop``) only
-happens between iterations, so the final checkpoint is always a consistent one.
+Two layouts (``TrainConfig.loop``):
+
+- ``async`` (the default): while the learner updates on one batch, the workers already sample the
+  next with the weights they have, one update behind. PPO takes its ratio against the behaviour
+  policy's log-probabilities that each batch carries, so a lag of one update stays within its trust
+  region; ``train/policy_lag`` logs it. Evaluations queue on the workers behind the sampling and are
+  collected once done, so they never stop the learner.
+- ``sync``: every batch is collected with the weights the update starts from (strictly on-policy),
+  and the loop pauses for each evaluation. Kept for comparison.
+
+The weights travel through Ray's object store once per iteration (``ray.put``) and every worker
+reads them from there. Stopping (the budget is spent, or ``request_stop``) only happens between
+iterations, after the batch in flight has been learned from, so every episode the workers played
+is counted and the final checkpoint is always a consistent one.
 """
 
 from __future__ import annotations
@@ -19,15 +29,15 @@ import ray
 import torch
 
 from common.policy import PolicySnapshot
-from common.trajectory import EpisodeStats
+from common.trajectory import EpisodeStats, TrajectoryBatch
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
-from learner.evaluation import evaluate_on_hardest_task
+from learner.evaluation import EVALUATION_TASK, evaluation_metrics, evaluation_seeds
 from learner.metrics import MetricsLog
 from learner.network import kuka_policy_spec
 from learner.ppo import PPOLearner
 from rollout_worker.actor import WorkerSettings
-from rollout_worker.pool import WorkerPool
+from rollout_worker.pool import InFlight, WorkerPool
 
 RECENT_EPISODES = 100
 """Window of the running reward and success rate shown while training."""
@@ -97,14 +107,7 @@ class Trainer:
         pool = None
         try:
             pool = WorkerPool(settings, self.config.workers, pool_seed, name_prefix=self.actor_name_prefix)
-            snapshot_ref = ray.put(self.learner.snapshot())
-            while self.counters.steps < self.config.total_steps and not self._stop_requested:
-                snapshot_ref, report = self._iterate(pool, snapshot_ref)
-                metrics.write(self.counters.steps, report.metrics)
-                if on_iteration is not None:
-                    on_iteration(report)
-                if self.counters.iteration % self.config.checkpoint_every == 0:
-                    self.save()
+            _IterationLoop(self, pool, metrics, on_iteration).run()
             return self.save()
         finally:
             if pool is not None:
@@ -114,51 +117,145 @@ class Trainer:
     def save(self) -> Path:
         return save_checkpoint(self.run_dir, self.learner.state_dict(), self.counters, self.config)
 
-    def _iterate(
-        self, pool: WorkerPool, snapshot_ref: ray.ObjectRef[PolicySnapshot]
-    ) -> tuple[ray.ObjectRef[PolicySnapshot], IterationReport]:
-        started = time.perf_counter()
-        replacements_before = pool.replacements
-        batches = pool.sample(snapshot_ref)
-        sampled = time.perf_counter()
-        progress = self.counters.steps / self.config.total_steps
-        metrics = {f"loss/{name}": value for name, value in self.learner.update(batches, progress).items()}
-        snapshot_ref = ray.put(self.learner.snapshot())
-        updated = time.perf_counter()
 
-        steps = sum(batch.num_steps for batch in batches)
+@dataclass
+class _Evaluation:
+    """An evaluation in flight, and the metrics record of the iteration whose weights it plays."""
+
+    episodes: InFlight[list[EpisodeStats]]
+    record: dict[str, float]
+    started: float
+
+
+class _IterationLoop:
+    """One ``Trainer.run``: the batch and the evaluation in flight, and the metrics records held for it.
+
+    An iteration's record is written once its evaluation (if it has one) is in, so every record
+    holds the evaluation of that iteration's weights and the log stays one record per iteration, in
+    order. Records wait at most until the next checkpoint, the next evaluation or the end of the run.
+    """
+
+    def __init__(
+        self,
+        trainer: Trainer,
+        pool: WorkerPool,
+        metrics: MetricsLog,
+        on_iteration: Callable[[IterationReport], None] | None,
+    ) -> None:
+        self.trainer = trainer
+        self.config = trainer.config
+        self.pool = pool
+        self.metrics = metrics
+        self.on_iteration = on_iteration
+        self.evaluation: _Evaluation | None = None
+        self.held: list[tuple[int, dict[str, float]]] = []
+
+    def _wants_more(self, steps_after_this_batch: int) -> bool:
+        return steps_after_this_batch < self.config.total_steps and not self.trainer.stop_requested
+
+    def run(self) -> None:
+        trainer, asynchronous = self.trainer, self.config.loop == "async"
+        snapshot_ref = ray.put(trainer.learner.snapshot())
+        if not self._wants_more(trainer.counters.steps):
+            return
+        in_flight: InFlight[TrajectoryBatch] | None = self.pool.start_sampling(snapshot_ref)
+        while in_flight is not None:
+            started = time.perf_counter()
+            replacements_before = self.pool.replacements
+            batches = in_flight.result()
+            sampled = time.perf_counter()
+            steps = sum(batch.num_steps for batch in batches)
+            go_on = self._wants_more(trainer.counters.steps + steps)
+            # Asynchronous: the workers sample the next batch with the weights they have while the learner updates.
+            in_flight = self.pool.start_sampling(snapshot_ref) if asynchronous and go_on else None
+            progress = trainer.counters.steps / self.config.total_steps
+            lag = float(np.mean([trainer.learner.version - batch.policy_version for batch in batches]))
+            losses = trainer.learner.update(batches, progress, max_policy_lag=1 if asynchronous else 0)
+            snapshot_ref = ray.put(trainer.learner.snapshot())
+            updated = time.perf_counter()
+
+            record = {f"loss/{name}": value for name, value in losses.items()}
+            record.update(self._count(batches, self.pool.replacements - replacements_before))
+            record.update(
+                {
+                    "train/policy_lag": lag,
+                    "perf/sample_steps_per_second": steps / max(sampled - started, 1e-9),
+                    "perf/wait_seconds": sampled - started,  # the learner idle, waiting for the batch
+                    "perf/update_seconds": updated - sampled,  # the update and the weight broadcast
+                }
+            )
+            self.held.append((trainer.counters.steps, record))
+            if self.config.eval_every and trainer.counters.iteration % self.config.eval_every == 0:
+                # Asynchronous, it queues on the workers behind the batch in flight; synchronous, it runs now.
+                self._start_evaluation(snapshot_ref)
+            if in_flight is None and go_on:
+                in_flight = self.pool.start_sampling(snapshot_ref)
+            record["perf/steps_per_second"] = steps / (time.perf_counter() - started)
+            checkpoint = trainer.counters.iteration % self.config.checkpoint_every == 0
+            self._write_records(wait=checkpoint or not go_on or not asynchronous)
+            self._report(record)
+            if checkpoint:
+                trainer.save()
+        self._write_records(wait=True)
+
+    def _count(self, batches: list[TrajectoryBatch], replacements: int) -> dict[str, float]:
+        counters = self.trainer.counters
         episodes = [episode for batch in batches for episode in batch.episodes]
-        self.counters.iteration += 1
-        self.counters.steps += steps
         offline = sum(episode.task_id is None for episode in episodes)
-        self.counters.episodes += len(episodes)
-        self.counters.offline_episodes += offline
-        self.counters.worker_replacements += pool.replacements - replacements_before
-        self.recent_episodes.extend(episodes)
-        metrics.update(
-            {
-                "iteration": float(self.counters.iteration),
-                "train/episodes": float(len(episodes)),
-                "train/offline_episodes": float(offline),
-                "train/episode_reward": _mean(e.reward for e in episodes),
-                "train/success_rate": _mean(e.success for e in episodes),
-                "train/episode_length": _mean(e.length for e in episodes),
-                "perf/sample_steps_per_second": steps / (sampled - started),
-                "perf/steps_per_second": steps / (updated - started),
-                "perf/update_seconds": updated - sampled,  # the update and the weight broadcast
-                "workers/replacements": float(self.counters.worker_replacements),
-            }
+        counters.iteration += 1
+        counters.steps += sum(batch.num_steps for batch in batches)
+        counters.episodes += len(episodes)
+        counters.offline_episodes += offline
+        counters.worker_replacements += replacements
+        self.trainer.recent_episodes.extend(episodes)
+        return {
+            "iteration": float(counters.iteration),
+            "train/episodes": float(len(episodes)),
+            "train/offline_episodes": float(offline),
+            "train/episode_reward": _mean(e.reward for e in episodes),
+            "train/success_rate": _mean(e.success for e in episodes),
+            "train/episode_length": _mean(e.length for e in episodes),
+            "workers/replacements": float(counters.worker_replacements),
+        }
+
+    def _start_evaluation(self, snapshot_ref: ray.ObjectRef[PolicySnapshot]) -> None:
+        if self.evaluation is not None:
+            self._collect_evaluation()  # still running: one at a time, in order
+        episodes = self.pool.start_evaluation(
+            snapshot_ref, EVALUATION_TASK, evaluation_seeds(self.config.eval_episodes)
         )
-        if self.config.eval_every and self.counters.iteration % self.config.eval_every == 0:
-            metrics.update(evaluate_on_hardest_task(pool, snapshot_ref, self.config.eval_episodes))
-            metrics["perf/eval_seconds"] = time.perf_counter() - updated
-        report = IterationReport(
-            counters=replace(self.counters),
-            metrics=metrics,
-            recent_reward=_mean(e.reward for e in self.recent_episodes),
-            recent_success_rate=_mean(e.success for e in self.recent_episodes),
-        )
-        return snapshot_ref, report
+        self.evaluation = _Evaluation(episodes, self.held[-1][1], time.perf_counter())
+
+    def _collect_evaluation(self) -> None:
+        assert self.evaluation is not None
+        evaluation, self.evaluation = self.evaluation, None
+        waited = time.perf_counter()
+        episodes = [episode for share in evaluation.episodes.result() for episode in share]
+        finished = time.perf_counter()
+        evaluation.record.update(evaluation_metrics(episodes))
+        evaluation.record["perf/eval_seconds"] = finished - evaluation.started  # from its start to its end
+        evaluation.record["perf/eval_wait_seconds"] = finished - waited  # the learner idle, waiting for it
+
+    def _write_records(self, wait: bool) -> None:
+        """Write the held records up to the first whose evaluation is still running (``wait``: all of them)."""
+        if self.evaluation is not None and (wait or self.evaluation.episodes.done()):
+            self._collect_evaluation()
+        pending = self.evaluation.record if self.evaluation is not None else None
+        while self.held and self.held[0][1] is not pending:
+            step, record = self.held.pop(0)
+            self.metrics.write(step, record)
+
+    def _report(self, record: dict[str, float]) -> None:
+        if self.on_iteration is not None:
+            trainer = self.trainer
+            self.on_iteration(
+                IterationReport(
+                    counters=replace(trainer.counters),
+                    metrics=record,
+                    recent_reward=_mean(e.reward for e in trainer.recent_episodes),
+                    recent_success_rate=_mean(e.success for e in trainer.recent_episodes),
+                )
+            )
 
 
 def _mean(values: Iterable[float]) -> float:

@@ -25,7 +25,10 @@ def one_torch_thread():
     torch.set_num_threads(previous)
 
 
-def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_torch_thread):
+@pytest.mark.parametrize("policy_lag", [0, 1], ids=["on-policy", "one-update-lag"])
+def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_torch_thread, policy_lag):
+    """With a lag of one, each batch is sampled with the weights from before the previous update,
+    as the asynchronous training loop does."""
     config = PPOConfig(rollout_length=128, gamma=0.99, minibatch_size=128, update_epochs=10, learning_rate=1e-3)
     learner = PPOLearner(PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(32, 32), init_log_std=0.0), config, seed=1)
     tasks = RecordingTasks()
@@ -33,9 +36,14 @@ def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_tor
     untrained_return, untrained_success = evaluate(learner)
 
     iterations = 25
+    behaviour = learner.snapshot()
     for iteration in range(iterations):
-        batch = sampler.sample(InferencePolicy(learner.snapshot(), seed=iteration), config.rollout_length)
-        learner.update([batch], progress=iteration / iterations)
+        batch = sampler.sample(InferencePolicy(behaviour, seed=iteration), config.rollout_length)
+        if policy_lag == 0:
+            learner.update([batch], progress=iteration / iterations)
+        behaviour = learner.snapshot()  # lagged: taken before the update that this batch feeds
+        if policy_lag == 1:
+            learner.update([batch], progress=iteration / iterations, max_policy_lag=1)
 
     trained_return, trained_success = evaluate(learner)
     assert trained_success >= 0.9, (untrained_success, trained_success)
@@ -52,3 +60,6 @@ def test_a_batch_from_an_earlier_policy_is_refused(one_torch_thread):
     learner.update([batch])
     with pytest.raises(ValueError, match="on-policy"):
         learner.update([batch])
+    learner.update([batch], max_policy_lag=1)  # the asynchronous loop's one update behind
+    with pytest.raises(ValueError, match="at most 1 behind"):
+        learner.update([batch], max_policy_lag=1)

@@ -94,7 +94,11 @@ def test_train_logs_checkpoints_reports_every_episode_resumes_and_stops_on_ctrl_
     records = metrics(run_dir)
     assert [r["step"] for r in records] == [BATCH, 2 * BATCH, 3 * BATCH]
     assert sum(r["train/episodes"] for r in records) == checkpoint.counters.episodes > 0
+    # The evaluation of the second iteration's weights ran behind sampling, and is in that iteration's record.
     assert 0.0 <= records[1]["eval/success_rate"] <= 1.0 and records[1]["eval/return"] is not None
+    assert "eval/return" not in records[0] and "eval/return" not in records[2]
+    # The default loop: after the first batch, the workers sample one update behind the learner.
+    assert [r["train/policy_lag"] for r in records] == [0.0, 1.0, 1.0] and checkpoint.config.loop == "async"
     events = EventAccumulator(str(run_dir / "tensorboard"))
     events.Reload()
     expected_tags = {"train/episode_reward", "loss/policy_loss", "eval/return", "perf/steps_per_second"}
@@ -128,6 +132,15 @@ def test_train_logs_checkpoints_reports_every_episode_resumes_and_stops_on_ctrl_
     with local_teacher_service(run_dir) as teacher_url:
         expected = checkpoint.counters.episodes - checkpoint.counters.offline_episodes
         assert results_received(teacher_url, run_dir) == expected
+
+
+def test_the_synchronous_loop_stays_on_policy(tmp_path, ray_cluster):
+    run_dir = tmp_path / "sync"
+    train(run_dir, ray_cluster, "--total-steps", str(2 * BATCH), "--loop", "sync")
+    records = metrics(run_dir)
+    assert [r["train/policy_lag"] for r in records] == [0.0, 0.0]
+    assert records[1]["eval/episode_length"] > 0
+    assert load_checkpoint(latest_checkpoint(run_dir)).config.loop == "sync"
 
 
 def test_training_finishes_when_a_rollout_actor_is_killed_mid_run(tmp_path, ray_cluster):
