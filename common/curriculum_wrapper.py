@@ -87,13 +87,15 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         register: CurriculumRegistration | None = None,
         apply_task: ApplyTask | None = None,
         token: str | None = None,
-        prefetch: int = 8,
+        prefetch: int = 16,
         task_timeout: float = 5.0,
+        report_interval: float = 1.0,
         startup_timeout: float = 10.0,
         close_timeout: float = 30.0,
     ) -> None:
         """``token`` defaults to ``$KC_TEACHER_TOKEN``. ``prefetch`` tasks are drawn per request for
-        the whole process. ``startup_timeout`` bounds the check made here."""
+        the whole process, whose results are sent together every ``report_interval`` seconds (see
+        ``TeacherClient``). ``startup_timeout`` bounds the check made here."""
         super().__init__(env)
         self.teacher_url = teacher_url.rstrip("/")
         self.curriculum = curriculum
@@ -105,6 +107,7 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
             token=token if token is not None else os.environ.get(TOKEN_VARIABLE) or None,
             prefetch=prefetch,
             task_timeout=task_timeout,
+            report_interval=report_interval,
         )
         self._client: TeacherClient | None = None
         self._client_pid: int | None = None
@@ -183,6 +186,7 @@ class _ClientKey:
     token: str | None
     prefetch: int
     task_timeout: float
+    report_interval: float
 
     def client(self, request_timeout: float = 10.0) -> TeacherClient:
         return TeacherClient(
@@ -192,6 +196,7 @@ class _ClientKey:
             prefetch=self.prefetch,
             task_timeout=self.task_timeout,
             request_timeout=request_timeout,
+            report_interval=self.report_interval,
         )
 
 

@@ -127,16 +127,20 @@ class TeacherClient:
         request_timeout: float = 10.0,
         recent_tasks: int = 64,
         backoff: Backoff = Backoff(),
+        report_interval: float = 0.0,
     ) -> None:
         """``prefetch`` tasks are drawn per request; ``task_timeout`` bounds how long ``next_task``
         keeps retrying before it hands out an offline assignment; ``recent_tasks`` issued tasks are
-        remembered for those."""
+        remembered for those. After each delivery the sender waits ``report_interval`` seconds, so
+        that the results reported meanwhile go out in one request (``flush`` and ``close`` cut the
+        wait short): one request per result costs a producer of short episodes a few milliseconds each."""
         if not 1 <= prefetch <= MAX_TASKS_PER_REQUEST:
             raise ValueError(f"prefetch must be in [1, {MAX_TASKS_PER_REQUEST}], got {prefetch}")
         self.curriculum = curriculum
         self.prefetch = prefetch
         self.task_timeout = task_timeout
         self.backoff = backoff
+        self.report_interval = report_interval
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=request_timeout)
         self._path = f"{API_PREFIX}/curricula/{curriculum}"
@@ -150,6 +154,7 @@ class TeacherClient:
         self._results: deque[ResultItem] = deque()
         self._results_changed = threading.Condition()
         self._stop = threading.Event()
+        self._flushing = 0
         self._fatal: TeacherRequestError | None = None
         self.delivered = 0
         """Results the service has acknowledged (accepted or already known)."""
@@ -240,13 +245,18 @@ class TeacherClient:
         """Wait until every queued result is delivered; False if some are still pending at timeout."""
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._results_changed:
-            while self._results:
-                if self._fatal is not None:
-                    raise self._fatal
-                remaining = None if deadline is None else deadline - time.monotonic()
-                if remaining is not None and remaining <= 0:
-                    return False
-                self._results_changed.wait(remaining)
+            self._flushing += 1
+            self._results_changed.notify_all()
+            try:
+                while self._results:
+                    if self._fatal is not None:
+                        raise self._fatal
+                    remaining = None if deadline is None else deadline - time.monotonic()
+                    if remaining is not None and remaining <= 0:
+                        return False
+                    self._results_changed.wait(remaining)
+            finally:
+                self._flushing -= 1
         return True
 
     def close(self, timeout: float = 30.0) -> int:
@@ -308,6 +318,17 @@ class TeacherClient:
             self._fatal = None
             self.delivered += len(batch)
             self._settle(batch, keep=[])
+            self._let_results_gather()
+
+    def _let_results_gather(self) -> None:
+        """Wait ``report_interval`` before the next delivery; a flush, a close or a full batch ends it."""
+        deadline = time.monotonic() + self.report_interval
+        with self._results_changed:
+            while not (self._stop.is_set() or self._flushing or len(self._results) >= MAX_RESULTS_PER_REQUEST):
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return
+                self._results_changed.wait(remaining)
 
     def _settle(self, batch: list[ResultItem], keep: list[ResultItem]) -> None:
         """Drop a sent batch from the head of the buffer, putting back what is to be resent."""

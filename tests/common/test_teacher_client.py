@@ -119,6 +119,33 @@ def test_offline_assignments_keep_a_worker_busy_while_the_teacher_is_down(servic
     assert _counters(service, "offline")["results_received"] == 1
 
 
+def _result_requests(service: ServiceProcess) -> float:
+    """POST .../results requests the service has answered with 200, from its Prometheus metrics."""
+    wanted = 'kc_http_requests_total{method="POST",route="/api/v1/curricula/{name}/results",status="200"} '
+    lines = httpx.get(f"{service.url}/metrics").text.splitlines()
+    return sum(float(line.removeprefix(wanted)) for line in lines if line.startswith(wanted))
+
+
+@pytest.mark.parametrize("report_interval", [0.0, 5.0])
+def test_a_report_interval_gathers_results_and_flush_does_not_wait_for_it(service, report_interval):
+    curriculum = f"gathered-{report_interval:g}"
+    with _client(service, curriculum, prefetch=20, report_interval=report_interval) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        before = _result_requests(service)
+        for assignment in [client.next_task() for _ in range(20)]:
+            client.report(assignment, reward=1.0)
+            time.sleep(0.02)
+        started = time.monotonic()
+        assert client.flush(timeout=30)
+        assert time.monotonic() - started < 2.0, "a flush does not wait out the interval"
+        requests = _result_requests(service) - before
+    assert _counters(service, curriculum)["results_received"] == 20
+    if report_interval:
+        assert requests <= 2, "the first result alone, then the other 19 together"
+    else:
+        assert requests >= 5, "without an interval, results go out as they come"
+
+
 def test_no_task_at_all_is_an_error_not_a_hang():
     with (
         TeacherClient(f"http://127.0.0.1:{free_port()}", "kuka", task_timeout=0.3, backoff=FAST_RETRIES) as client,
