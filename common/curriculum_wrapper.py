@@ -116,11 +116,6 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         self._episode_length = 0
         _check_curriculum(self._client_key, register, startup_timeout)
 
-    @property
-    def task(self) -> Task | None:
-        """The current episode's task; ``None`` before the first reset."""
-        return None if self._assignment is None else dict(self._assignment.params)
-
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[ObsType, dict[str, Any]]:
