@@ -3,17 +3,19 @@
 Two layouts (``TrainConfig.loop``):
 
 - ``async`` (the default): while the learner updates on one batch, the workers already sample the
-  next with the weights they have, one update behind. PPO takes its ratio against the behaviour
-  policy's log-probabilities that each batch carries, so a lag of one update stays within its trust
-  region; ``train/policy_lag`` logs it. Evaluations queue on the workers behind the sampling and are
-  collected once done, so they never stop the learner.
+  next with the weights they have, one update behind; each worker starts its share of the next
+  batch the moment it has delivered its share of this one, so none waits for the slowest. PPO takes
+  its ratio against the behaviour policy's log-probabilities that each batch carries, so a lag of
+  one update stays within its trust region; ``train/policy_lag`` logs it. Evaluations queue on the
+  workers behind the sampling and are collected once done, so they never stop the learner.
 - ``sync``: every batch is collected with the weights the update starts from (strictly on-policy),
   and the loop pauses for each evaluation. Kept for comparison.
 
 The weights travel through Ray's object store once per iteration (``ray.put``) and every worker
 reads them from there. Stopping (the budget is spent, or ``request_stop``) only happens between
-iterations, after the batch in flight has been learned from, so every episode the workers played
-is counted and the final checkpoint is always a consistent one.
+iterations, after every batch in flight has been learned from (asynchronous, a stop requested while
+the next batch is already under way waits for it), so every episode the workers played is counted
+and the final checkpoint is always a consistent one.
 """
 
 from __future__ import annotations
@@ -162,12 +164,16 @@ class _IterationLoop:
         while in_flight is not None:
             started = time.perf_counter()
             replacements_before = self.pool.replacements
-            batches = in_flight.result()
+            # Asynchronous: each worker starts its next batch, with the newest weights, the moment it has
+            # delivered this one, and samples it while the learner updates; none waits for the slowest.
+            following = None
+            if asynchronous and self._wants_more(trainer.counters.steps + self.config.batch_size):
+                following = self.pool.start_sampling(snapshot_ref, send=False)
+            batches = in_flight.result(on_arrival=following.send if following is not None else None)
             sampled = time.perf_counter()
             steps = sum(batch.num_steps for batch in batches)
-            go_on = self._wants_more(trainer.counters.steps + steps)
-            # Asynchronous: the workers sample the next batch with the weights they have while the learner updates.
-            in_flight = self.pool.start_sampling(snapshot_ref) if asynchronous and go_on else None
+            go_on = following is not None or (not asynchronous and self._wants_more(trainer.counters.steps + steps))
+            in_flight = following
             progress = trainer.counters.steps / self.config.total_steps
             lag = float(np.mean([trainer.learner.version - batch.policy_version for batch in batches]))
             losses = trainer.learner.update(batches, progress, max_policy_lag=1 if asynchronous else 0)

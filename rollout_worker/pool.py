@@ -3,7 +3,9 @@
 A dead actor (crashed, killed, node lost) is replaced by a fresh one with a new seed stream and
 asked again for what the dead one owed, so every call returns a full set of results. Calls can be
 left in flight (``start_sampling``, ``start_evaluation``) while the learner does other work; an
-actor runs its calls in the order they were made.
+actor runs its calls in the order they were made. A call can also be made slot by slot
+(``start_sampling(..., send=False)`` then ``send``), for instance each slot as soon as it
+has delivered its previous batch, so no actor waits for the slowest one.
 """
 
 from __future__ import annotations
@@ -30,14 +32,22 @@ Submit = Callable[[Any, int], "ray.ObjectRef[Any]"]
 class InFlight(Generic[Result]):
     """One call on every slot of a pool, made but not yet collected."""
 
-    def __init__(self, pool: WorkerPool, submit: Submit) -> None:
+    def __init__(self, pool: WorkerPool, submit: Submit, send: bool = True) -> None:
+        """``send=False``: no slot is called yet; ``send`` each one before ``result``."""
         self._pool = pool
         self._submit = submit
         self._results: list[Any] = [None] * pool.size
         self._deaths = [0] * pool.size
+        self._unsent = set() if send else set(range(pool.size))
         self._pending: dict[ray.ObjectRef[Any], tuple[int, Any]] = {}
-        for slot in range(pool.size):
-            self._send(slot)
+        if send:
+            for slot in range(pool.size):
+                self._send(slot)
+
+    def send(self, slot: int) -> None:
+        """Make the call on one slot that was left unsent."""
+        self._unsent.remove(slot)
+        self._send(slot)
 
     def _send(self, slot: int) -> None:
         worker = self._pool.worker(slot)
@@ -46,10 +56,15 @@ class InFlight(Generic[Result]):
     def done(self) -> bool:
         """Whether every slot has answered (a dead actor's answer is its death), without waiting."""
         ready, _ = ray.wait(list(self._pending), num_returns=len(self._pending), timeout=0)
-        return len(ready) == len(self._pending)
+        return not self._unsent and len(ready) == len(self._pending)
 
-    def result(self) -> list[Result]:
-        """Every slot's result, in slot order; waits, and retries a slot on a fresh actor when its actor dies."""
+    def result(self, on_arrival: Callable[[int], None] | None = None) -> list[Result]:
+        """Every slot's result, in slot order; waits, and retries a slot on a fresh actor when its actor dies.
+
+        ``on_arrival(slot)`` runs as each slot's result comes in, while the others are still awaited.
+        """
+        if self._unsent:
+            raise RuntimeError(f"slots {sorted(self._unsent)} were never sent")
         while self._pending:
             [ready], _ = ray.wait(list(self._pending), num_returns=1)
             slot, worker = self._pending.pop(ready)
@@ -63,6 +78,9 @@ class InFlight(Generic[Result]):
                     ) from error
                 self._pool.replace_if_current(slot, worker)
                 self._send(slot)
+                continue
+            if on_arrival is not None:
+                on_arrival(slot)
         return self._results
 
 
@@ -105,9 +123,12 @@ class WorkerPool:
         self.replacements += 1
         self._workers[slot] = self._start(slot)
 
-    def start_sampling(self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot) -> InFlight[TrajectoryBatch]:
-        """One batch from every worker; pass a ``ray.put`` reference so the weights are shipped once."""
-        return InFlight(self, lambda worker, _: worker.sample.remote(snapshot))
+    def start_sampling(
+        self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot, send: bool = True
+    ) -> InFlight[TrajectoryBatch]:
+        """One batch from every worker; pass a ``ray.put`` reference so the weights are shipped once.
+        ``send=False`` leaves each slot to be started with ``InFlight.send``."""
+        return InFlight(self, lambda worker, _: worker.sample.remote(snapshot), send)
 
     def sample(self, snapshot: ray.ObjectRef[PolicySnapshot] | PolicySnapshot) -> list[TrajectoryBatch]:
         return self.start_sampling(snapshot).result()
