@@ -28,7 +28,7 @@ from tqdm import tqdm
 from common.task_space import KUKA_TASK_SPACE
 from learner.arguments import int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
-from learner.config import TrainConfig
+from learner.config import LOOPS, TrainConfig
 from learner.evaluate import (
     EvaluationResult,
     UsageError,
@@ -65,6 +65,7 @@ TRAINING_FLAGS = {
     "checkpoint_every": "--checkpoint-every",
     "curve_every": "--eval-every",
     "curve_episodes": "--eval-episodes",
+    "loop": "--loop",
 }
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
 
@@ -437,6 +438,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_int,
         default=defaults.eval_episodes,
         help=f"episodes per learning-curve evaluation (default {defaults.eval_episodes})",
+    )
+    training.add_argument(
+        "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
     )
     training.add_argument(
         "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"

@@ -1,0 +1,179 @@
+"""How much of the machine's raw simulation speed ``kuka-curriculum train`` turns into training.
+
+In one run: the raw ceiling (W environment processes at once, random actions, resets and scripted
+grasps included) and ``kuka-curriculum train`` as a person runs it (its own local Ray and teacher
+service, ALP-GMM, evaluations on as by default) over a fixed budget, once per training loop asked
+for. For each run it prints the steps per second over the whole command (start-up included) and
+over the training loop, their ratios to the ceiling, and where the learner's wall time went:
+waiting for batches, updating, waiting for evaluations, and the rest (logging, checkpoints, the
+progress display).
+
+Two ceilings, because the environment's cost per step depends on the task: an episode ends with a
+scripted grasp of ~80 ms, and a curriculum's easier tasks start the arm lower, so its episodes are
+shorter and grasp more often per step than the hardest task's. The *hardest-task* ceiling (measured
+before and after the runs) is the machine's best case; the *same-tasks* ceiling replays, in W raw
+processes, the tasks the training run itself played (read from its teacher's database, shuffled),
+so the raw loop does the same work per step as training did. The pipeline's own efficiency is the
+ratio to the second.
+
+    .venv/bin/python bench/train_speed.py --workers 2 --total-steps 300000 --loops async sync
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from common.kuka_env import KukaGraspEnv
+from common.task_space import KUKA_TASK_SPACE, Task
+from learner.config import LOOPS, TrainConfig
+from learner.teacher_process import DATABASE_FILE
+from teacher_service.store import Store
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class RawRate:
+    steps_per_second: float
+    mean_episode_length: float
+
+
+def raw_env_rate(seconds: float, seed: int, tasks: list[Task]) -> RawRate:
+    """Random-action steps per second of one environment in this process, resets and grasps included;
+    each episode plays the next of ``tasks``, in turn."""
+    env = KukaGraspEnv(max_steps=TrainConfig.max_episode_steps)
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed, options={"task": tasks[0]})
+    steps, episodes = 0, 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        _, _, terminated, truncated, _ = env.step(rng.uniform(-1.0, 1.0, size=3).astype(np.float32))
+        steps += 1
+        if terminated or truncated:
+            episodes += 1
+            env.reset(options={"task": tasks[episodes % len(tasks)]})
+    elapsed = time.perf_counter() - start
+    env.close()
+    return RawRate(steps / elapsed, steps / max(episodes, 1))
+
+
+def raw_ceiling(processes: int, seconds: float, first_seed: int, tasks: list[Task]) -> RawRate:
+    """``processes`` raw environments running at once, each taking every ``processes``-th task."""
+    shares = [(seconds, first_seed + index, tasks[index::processes] or tasks) for index in range(processes)]
+    with multiprocessing.get_context("spawn").Pool(processes) as pool:
+        rates = pool.starmap(raw_env_rate, shares)
+    return RawRate(
+        float(sum(rate.steps_per_second for rate in rates)),
+        float(np.mean([rate.mean_episode_length for rate in rates])),
+    )
+
+
+def played_tasks(run_dir: Path, seed: int) -> list[Task]:
+    """The task of every episode the run reported to its teacher, shuffled: a short replay sees the whole mix."""
+    store = Store(run_dir / DATABASE_FILE)
+    try:
+        [curriculum] = store.curricula()
+        tasks = [result.task for result in store.results(curriculum.id)]
+    finally:
+        store.close()
+    order = np.random.default_rng(seed).permutation(len(tasks))
+    return [tasks[index] for index in order]
+
+
+@dataclass(frozen=True)
+class TrainRun:
+    loop: str
+    steps: int
+    command_seconds: float
+    loop_seconds: float
+    waiting: float
+    updating: float
+    evaluating: float
+    mean_episode_length: float
+    same_tasks_ceiling: RawRate
+
+    @property
+    def other(self) -> float:
+        return self.loop_seconds - self.waiting - self.updating - self.evaluating
+
+
+def timed_train(loop: str, workers: int, total_steps: int, seed: int, scratch: Path, raw_seconds: float) -> TrainRun:
+    run_dir = scratch / f"train-{loop}"
+    command = [sys.executable, "-m", "common.cli", "train", "--loop", loop, "--workers", str(workers),
+               "--total-steps", str(total_steps), "--seed", str(seed), "--run-dir", str(run_dir)]  # fmt: skip
+    started = time.perf_counter()
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
+    command_seconds = time.perf_counter() - started
+    if done.returncode != 0:
+        raise SystemExit(f"train --loop {loop} failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+    records = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    first_iteration = records[0]["step"] / records[0]["perf/steps_per_second"]
+    episodes = sum(r["train/episodes"] for r in records)
+    return TrainRun(
+        loop=loop,
+        steps=int(records[-1]["step"]),
+        command_seconds=command_seconds,
+        loop_seconds=records[-1]["time"] - records[0]["time"] + first_iteration,
+        waiting=sum(r["perf/wait_seconds"] for r in records),
+        updating=sum(r["perf/update_seconds"] for r in records),
+        evaluating=sum(r.get("perf/eval_wait_seconds") or 0.0 for r in records),
+        mean_episode_length=sum(r["train/episode_length"] * r["train/episodes"] for r in records if r["train/episodes"])
+        / episodes,
+        same_tasks_ceiling=raw_ceiling(workers, raw_seconds, seed, played_tasks(run_dir, seed)),
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--workers", type=int, default=TrainConfig.workers, help="rollout actors and raw processes, W")
+    parser.add_argument("--total-steps", type=int, default=300_000, help="train's budget (default 300,000)")
+    parser.add_argument("--loops", nargs="+", choices=LOOPS, default=list(LOOPS), help="training loops to time")
+    parser.add_argument(
+        "--raw-seconds",
+        type=float,
+        default=30.0,
+        help="each raw measurement (the hardest-task one split before and after)",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    hardest = [KUKA_TASK_SPACE.hardest()]
+    with tempfile.TemporaryDirectory() as scratch:
+        before = raw_ceiling(args.workers, args.raw_seconds / 2, 0, hardest)
+        runs = [
+            timed_train(loop, args.workers, args.total_steps, args.seed, Path(scratch), args.raw_seconds)
+            for loop in args.loops
+        ]
+        after = raw_ceiling(args.workers, args.raw_seconds / 2, args.workers, hardest)
+    ceiling = (before.steps_per_second + after.steps_per_second) / 2
+
+    print(f"hardest-task ceiling, {args.workers} raw environment processes at once: {ceiling:,.0f} steps/s "
+          f"(before {before.steps_per_second:,.0f}, after {after.steps_per_second:,.0f}; "
+          f"episodes of {before.mean_episode_length:.0f} steps)")  # fmt: skip
+    for run in runs:
+        same = run.same_tasks_ceiling.steps_per_second
+        print(f"\ntrain --loop {run.loop}: {run.steps:,} steps, episodes of {run.mean_episode_length:.0f} steps")
+        print(f"  same-tasks ceiling {same:7,.0f} steps/s (its tasks replayed with random actions: "
+              f"episodes of {run.same_tasks_ceiling.mean_episode_length:.0f} steps)")  # fmt: skip
+        for label, seconds in (("whole command", run.command_seconds), ("training loop", run.loop_seconds)):
+            rate = run.steps / seconds
+            print(f"  {label:18} {rate:7,.0f} steps/s  ratio {rate / ceiling:.2f} to the hardest-task ceiling, "
+                  f"{rate / same:.2f} to the same-tasks one  ({seconds:.1f} s)")  # fmt: skip
+        print(f"  start-up and shut-down: {run.command_seconds - run.loop_seconds:.1f} s")
+        shares = {"waiting for batches": run.waiting, "updating": run.updating,
+                  "waiting for evaluations": run.evaluating, "other": run.other}  # fmt: skip
+        print("  learner's loop time: " + ", ".join(f"{name} {s / run.loop_seconds:.0%}" for name, s in shares.items()))
+
+
+if __name__ == "__main__":
+    main()
