@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Callable
+from typing import Any
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:
@@ -23,3 +25,15 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 
 positive_int = int_at_least(1)
 non_negative_int = int_at_least(0)
+
+
+def setting(text: str) -> tuple[str, Any]:
+    """An argparse type: ``NAME=VALUE`` with VALUE in JSON (``fit_rate=100``, ``reward_range=[-5,10]``);
+    a VALUE that is not JSON is taken as a string."""
+    name, equals, value = text.partition("=")
+    if not equals or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        return name.strip(), json.loads(value)
+    except json.JSONDecodeError:
+        return name.strip(), value

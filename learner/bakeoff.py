@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import signal
 import subprocess
@@ -26,7 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from common.task_space import KUKA_TASK_SPACE
-from learner.arguments import int_at_least, positive_int
+from learner.arguments import int_at_least, positive_int, setting
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.config import LOOPS, TrainConfig
 from learner.evaluate import (
@@ -68,6 +69,14 @@ TRAINING_FLAGS = {
     "loop": "--loop",
 }
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
+REPEATED_FLAGS = {"teacher_params": "--teacher-param", "ppo": "--ppo"}
+"""Bake-off options given as NAME=VALUE pairs, handed to every run as one flag per pair."""
+ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}}
+"""Settings newer than some stored bake-offs, with the value their runs were trained with."""
+SUCCESS_TARGET = 0.8
+"""The success rate on the hardest task whose first crossing the report times."""
+CURVE_WINDOW = 3
+"""Consecutive in-run evaluations pooled for that reading, so it is not one small evaluation's luck."""
 
 
 class RunFailed(Exception):
@@ -106,7 +115,7 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
     """
     path = Path(out) / SETTINGS_FILE
     if path.exists():
-        stored = json.loads(path.read_text(encoding="utf-8"))
+        stored = ADDED_SETTINGS | json.loads(path.read_text(encoding="utf-8"))
         differences = [
             f"{name}: {stored.get(name)!r} before, {value!r} now"
             for name, value in settings.items()
@@ -144,6 +153,9 @@ def train_command(
     ]
     for name, flag in TRAINING_FLAGS.items():
         command += [flag, str(settings[name])]
+    for name, flag in REPEATED_FLAGS.items():
+        for key, value in settings[name].items():
+            command += [flag, f"{key}={json.dumps(value)}"]
     if ray_address is not None:
         command += ["--ray-address", ray_address]
     return command + (["--resume"] if resume else [])
@@ -219,17 +231,34 @@ def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None) -> E
     return result
 
 
-def learning_curve(run: Run) -> dict[int, float]:
-    """Hardest-task evaluation return by environment step, from the run's metrics log.
+def learning_curve(run: Run, metric: str = "eval/return") -> dict[int, float]:
+    """A hardest-task evaluation metric by environment step, from the run's metrics log.
 
     An interrupted run repeats the iterations after its last checkpoint, so a step logged twice
     keeps its latest record.
     """
     return {
-        int(record["step"]): float(record["eval/return"])
-        for record in _metrics_records(run)
-        if record.get("eval/return") is not None
+        int(record["step"]): float(record[metric]) for record in _metrics_records(run) if record.get(metric) is not None
     }
+
+
+def steps_to_success(run: Run, target: float = SUCCESS_TARGET, window: int = CURVE_WINDOW) -> int | None:
+    """The first step at which the last ``window`` in-run evaluations, pooled, reach ``target`` success
+    (they share their episode count, so pooling is their mean); None if they never do."""
+    curve = sorted(learning_curve(run, "eval/success_rate").items())
+    for end in range(window, len(curve) + 1):
+        if np.mean([rate for _, rate in curve[end - window : end]]) >= target:
+            return curve[end - 1][0]
+    return None
+
+
+def median_steps(steps: Sequence[int | None]) -> float | None:
+    """The median over seeds, a seed that never got there counting as slower than all; None if the
+    median seed never got there."""
+    ordered = sorted(math.inf if value is None else value for value in steps)
+    middle = len(ordered) // 2
+    median = ordered[middle] if len(ordered) % 2 else (ordered[middle - 1] + ordered[middle]) / 2
+    return None if math.isinf(median) else float(median)
 
 
 @dataclass(frozen=True)
@@ -252,10 +281,30 @@ class TeacherResult:
     def seed_returns(self) -> list[float]:
         return [result.returns.estimate for result in self.evaluations]
 
+    @property
+    def seed_success_rates(self) -> list[float]:
+        return [result.success_rate.estimate for result in self.evaluations]
+
+    @property
+    def success_over_seeds(self) -> Interval:
+        """The mean of the seeds' success rates, with a Student-t interval over seeds: what a new seed may give."""
+        return mean_interval(self.seed_success_rates)
+
+    @property
+    def return_over_seeds(self) -> Interval:
+        return mean_interval(self.seed_returns)
+
+    @property
+    def seed_steps_to_success(self) -> list[int | None]:
+        return [steps_to_success(run) for run in self.runs]
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "teacher": self.teacher,
             "seeds": len(self.runs),
+            "success_rate_over_seeds": self.success_over_seeds.to_dict(),
+            "return_over_seeds": self.return_over_seeds.to_dict(),
+            "median_steps_to_success": median_steps(self.seed_steps_to_success),
             "return": self.returns.to_dict(),
             "success_rate": self.success_rate.to_dict(),
             "book_return": BOOK_RETURNS.get(self.teacher),
@@ -266,8 +315,9 @@ class TeacherResult:
                     "return": result.returns.estimate,
                     "success_rate": result.success_rate.estimate,
                     "mean_length": result.mean_length,
+                    "steps_to_success": steps,
                 }
-                for run, result in zip(self.runs, self.evaluations, strict=True)
+                for run, result, steps in zip(self.runs, self.evaluations, self.seed_steps_to_success, strict=True)
             ],
         }
 
@@ -277,9 +327,27 @@ def _format_return(interval: Interval) -> str:
     return f"{interval.estimate:.2f} ± {spread}"
 
 
+def _format_interval(interval: Interval, percent: bool = False) -> str:
+    """'91% [85%, 97%]' or '5.20 [4.10, 6.30]'; bounds are 'n/a' for a single seed."""
+    number = "{:.0%}" if percent else "{:.2f}"
+    if np.isnan(interval.low):
+        return f"{number.format(interval.estimate)} [n/a]"
+    return f"{number.format(interval.estimate)} [{number.format(interval.low)}, {number.format(interval.high)}]"
+
+
+def _format_steps(steps: float | None) -> str:
+    return "not reached" if steps is None else f"{steps / 1e6:.2f}M"
+
+
+def _format_setting(name: str, value: Any) -> str:
+    if isinstance(value, dict):
+        return f"{name.replace('_', ' ')} " + ", ".join(f"{key}={json.dumps(item)}" for key, item in value.items())
+    return f"{name.replace('_', ' ')} {value}"
+
+
 def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int) -> str:
     trained = ", ".join(
-        f"{name.replace('_', ' ')} {value}" for name, value in settings.items() if name != "total_steps"
+        _format_setting(name, value) for name, value in settings.items() if name != "total_steps" and value != {}
     )
     seeds = max(len(result.runs) for result in results)
     lines = [
@@ -289,6 +357,30 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         f"steps with the same settings ({trained}) and hyperparameters. Each final policy then played "
         f"{episodes} deterministic episodes on the hardest task (episode seeds {seed} to {seed + episodes - 1}, "
         "the same for every run).",
+        "",
+        "## Between seeds: what a new seed may give",
+        "",
+        f"| Teacher | Success rate, mean over seeds ({CONFIDENCE:.0%} CI over seeds) | Success per seed "
+        f"| Median steps to {SUCCESS_TARGET:.0%} success (per seed) | Mean return over seeds ({CONFIDENCE:.0%} CI) |",
+        "|---|---|---|---|---|",
+    ]
+    for result in results:
+        success, returns = result.success_over_seeds, result.return_over_seeds
+        per_seed = ", ".join(f"{rate:.0%}" for rate in result.seed_success_rates)
+        steps = result.seed_steps_to_success
+        lines.append(
+            f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_interval(success, percent=True)} "
+            f"| {per_seed} | {_format_steps(median_steps(steps))} ({', '.join(_format_steps(v) for v in steps)}) "
+            f"| {_format_interval(returns)} |"
+        )
+    lines += [
+        "",
+        "The interval is a Student-t interval over the per-seed success rates: it says how much a new seed may "
+        f"vary. Steps to {SUCCESS_TARGET:.0%} success: the first step at which {CURVE_WINDOW} consecutive in-run "
+        f"evaluations on the hardest task ({settings['curve_episodes']} episodes each, every "
+        f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest.",
+        "",
+        "## Pooled episodes: evaluation noise",
         "",
         f"| Teacher | Mean return ({CONFIDENCE:.0%} CI) | Success rate (Wilson {CONFIDENCE:.0%}) | Seeds "
         "| Mean return per seed | Book's mean return |",
@@ -305,51 +397,57 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         )
     lines += [
         "",
-        "Intervals pool the evaluation episodes of all seeds, so they measure evaluation noise; the spread "
-        "between seeds is in the per-seed column.",
+        "These intervals pool the evaluation episodes of all seeds, so they measure evaluation noise, not the "
+        "spread between seeds.",
         "The book's figures (chapter 14) come from one seed per teacher at about 1.7M steps, with RLlib's PPO, "
         "60 workers and one ALP-GMM per environment copy, and no error bars; its 'no curriculum' run trained "
         "on the hardest task, as our `fixed` teacher does. It reports no uniform-random baseline.",
         "",
-        f"![Hardest-task evaluation return during training]({LEARNING_CURVES})",
+        f"![Hardest-task evaluations during training]({LEARNING_CURVES})",
         "",
     ]
     return "\n".join(lines)
 
 
 def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
-    """Mean over seeds, with a band from the worst to the best seed, one line per teacher."""
+    """Success rate and return on the hardest task during training: the mean over seeds, with a band
+    from the worst to the best seed, one line per teacher."""
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(8, 5), layout="constrained")
-    axes = figure.subplots()
-    plotted = False
-    for result in results:
-        curves = [learning_curve(run) for run in result.runs]
-        common_steps = sorted(set.intersection(*(set(curve) for curve in curves)))
-        if not common_steps:
-            continue
-        values = np.array([[curve[step] for step in common_steps] for curve in curves])
-        label = f"{TEACHER_LABELS[result.teacher]} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
-        (line,) = axes.plot(common_steps, values.mean(axis=0), label=label)
-        if len(curves) > 1:
-            axes.fill_between(common_steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.2)
-        plotted = True
-    if plotted:
-        axes.legend(loc="best")
-    else:
-        axes.text(
-            0.5,
-            0.5,
-            "no evaluations were logged during training (--curve-every 0?)",
-            ha="center",
-            va="center",
-            transform=axes.transAxes,
-        )
-    axes.set_xlabel("environment steps")
-    axes.set_ylabel("mean return on the hardest task")
-    axes.set_title("Hardest-task evaluation during training (band: worst to best seed)")
-    axes.grid(alpha=0.3)
+    figure = Figure(figsize=(12, 5), layout="constrained")
+    panels = figure.subplots(1, 2)
+    for axes, metric, label in zip(
+        panels, ("eval/success_rate", "eval/return"), ("success rate", "mean return"), strict=True
+    ):
+        plotted = False
+        for result in results:
+            curves = [learning_curve(run, metric) for run in result.runs]
+            common_steps = sorted(set.intersection(*(set(curve) for curve in curves)))
+            if not common_steps:
+                continue
+            values = np.array([[curve[step] for step in common_steps] for curve in curves])
+            name = f"{TEACHER_LABELS[result.teacher]} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
+            (line,) = axes.plot(common_steps, values.mean(axis=0), label=name)
+            if len(curves) > 1:
+                axes.fill_between(
+                    common_steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.2
+                )
+            plotted = True
+        if plotted:
+            axes.legend(loc="best")
+        else:
+            axes.text(
+                0.5,
+                0.5,
+                "no evaluations were logged during training (--curve-every 0?)",
+                ha="center",
+                va="center",
+                transform=axes.transAxes,
+            )
+        axes.set_xlabel("environment steps")
+        axes.set_ylabel(f"{label} on the hardest task")
+        axes.grid(alpha=0.3)
+    figure.suptitle("Hardest-task evaluations during training (band: worst to best seed)")
     figure.savefig(path, dpi=120)
 
 
@@ -443,6 +541,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
     )
     training.add_argument(
+        "--teacher-param",
+        dest="teacher_params",
+        action="append",
+        type=setting,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a teacher parameter for every run (VALUE in JSON); repeatable",
+    )
+    training.add_argument(
+        "--ppo",
+        action="append",
+        type=setting,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PPO hyperparameter for every run (VALUE in JSON); repeatable",
+    )
+    training.add_argument(
         "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"
     )
 
@@ -461,6 +576,7 @@ def run(args: argparse.Namespace) -> int:
 def _bakeoff(args: argparse.Namespace) -> int:
     teachers = list(dict.fromkeys(args.teachers))
     settings = {name: getattr(args, name) for name in TRAINING_FLAGS} | {"total_steps": args.total_steps}
+    settings |= {name: dict(getattr(args, name)) for name in REPEATED_FLAGS}
     check_settings(args.out, settings)
     runs = plan_runs(args.out, teachers, args.seeds)
     done = {run.name: run.steps_done() for run in runs}

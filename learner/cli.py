@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from learner.arguments import non_negative_int, positive_int
+from learner.arguments import non_negative_int, positive_int, setting
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
 DEFAULTS = TrainConfig()
@@ -75,6 +75,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
     run.add_argument(
+        "--teacher-param",
+        action="append",
+        type=setting,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a parameter of the teacher, VALUE in JSON (e.g. fit_rate=100); repeatable",
+    )
+    run.add_argument(
+        "--ppo",
+        action="append",
+        type=setting,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PPO hyperparameter, one of PPOConfig's fields in learner/config.py (e.g. entropy_coef=0.001); "
+        "repeatable",
+    )
+    run.add_argument(
         "--loop",
         choices=LOOPS,
         help="async: workers sample while the learner updates, one update behind; sync: strictly on-policy, "
@@ -121,8 +138,11 @@ _RUN_SETTINGS = (
 def _config_from(args: argparse.Namespace, base: TrainConfig) -> TrainConfig:
     """``base`` (the defaults, or a resumed run's saved config) with every flag given on top."""
     overrides: dict[str, Any] = {name: getattr(args, name) for name in _RUN_SETTINGS if getattr(args, name) is not None}
-    ppo = base.ppo if args.rollout_length is None else replace(base.ppo, rollout_length=args.rollout_length)
-    return replace(base, **overrides, ppo=ppo)
+    ppo_values = dict(args.ppo)
+    if args.rollout_length is not None:
+        ppo_values["rollout_length"] = args.rollout_length
+    teacher_overrides = {**base.teacher_overrides, **dict(args.teacher_param)}
+    return replace(base, **overrides, teacher_overrides=teacher_overrides, ppo=base.ppo.with_overrides(ppo_values))
 
 
 def curriculum_name(run_dir: Path) -> str:

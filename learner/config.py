@@ -7,7 +7,8 @@ them and ``--resume`` can rebuild the run exactly.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
@@ -69,6 +70,30 @@ class PPOConfig:
         _require(len(self.hidden_sizes) >= 1 and min(self.hidden_sizes) >= 1, "hidden_sizes must be positive widths")
         _require(self.torch_threads >= 1, "torch_threads must be at least 1")
 
+    def with_overrides(self, values: Mapping[str, Any]) -> PPOConfig:
+        """This config with some fields replaced by values from the command line or JSON, checked by
+        name and type (a float field takes an int; ``hidden_sizes`` takes a list)."""
+        known = {f.name: f for f in fields(self)}
+        unknown = sorted(set(values) - set(known))
+        _require(not unknown, f"unknown PPO hyperparameter(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        checked: dict[str, Any] = {}
+        for name, value in values.items():
+            current = getattr(self, name)
+            if name == "hidden_sizes" and isinstance(value, (list, tuple)):
+                value = tuple(value)
+                fits = all(isinstance(width, int) and not isinstance(width, bool) for width in value)
+            elif isinstance(current, bool):
+                fits = isinstance(value, bool)
+            elif isinstance(current, int):
+                fits = isinstance(value, int) and not isinstance(value, bool)
+            else:  # floats, and target_kl's float-or-None
+                fits = (value is None and name == "target_kl") or (
+                    isinstance(value, (int, float)) and not isinstance(value, bool)
+                )
+            _require(fits, f"PPO hyperparameter {name} cannot be {value!r}")
+            checked[name] = float(value) if isinstance(current, float) and value is not None else value
+        return replace(self, **checked)
+
 
 TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed")
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
@@ -103,6 +128,8 @@ class TrainConfig:
     """Evaluation episodes, one per fixed seed, shared out over the workers."""
     loop: Literal["async", "sync"] = "async"
     """async: workers sample the next batch, one update behind, while the learner updates; sync: on-policy, paused."""
+    teacher_overrides: dict[str, Any] = field(default_factory=dict)
+    """Teacher parameters on top of ``KUKA_TEACHER_PARAMS`` (the service validates them at registration)."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """Algorithm hyperparameters."""
 
@@ -119,8 +146,8 @@ class TrainConfig:
 
     @property
     def teacher_params(self) -> dict[str, Any]:
-        """What the curriculum is registered with (see ``KUKA_TEACHER_PARAMS``)."""
-        return dict(KUKA_TEACHER_PARAMS.get(self.teacher, {}))
+        """What the curriculum is registered with: ``KUKA_TEACHER_PARAMS``, then the overrides."""
+        return {**KUKA_TEACHER_PARAMS.get(self.teacher, {}), **self.teacher_overrides}
 
     @property
     def batch_size(self) -> int:

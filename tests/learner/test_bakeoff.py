@@ -8,7 +8,7 @@ import imageio.v3 as iio
 import pytest
 
 from common.cli import main
-from learner.bakeoff import BOOK_RETURNS, learning_curve, plan_runs
+from learner.bakeoff import BOOK_RETURNS, Run, learning_curve, median_steps, plan_runs, steps_to_success
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.stats import mean_interval
 
@@ -34,6 +34,8 @@ TINY = [
     "3",
     "--eval-processes",
     "1",
+    "--ppo",
+    "update_epochs=2",
 ]
 
 
@@ -57,6 +59,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         checkpoint = load_checkpoint(latest_checkpoint(run.directory))
         assert checkpoint.counters.steps == 2 * BATCH and checkpoint.config.teacher == run.teacher
         assert checkpoint.config.workers == 1 and checkpoint.config.max_episode_steps == 60
+        assert checkpoint.config.ppo.update_epochs == 2
         assert sorted(learning_curve(run)) == [BATCH, 2 * BATCH]
 
     results = json.loads((out / "results.json").read_text())
@@ -68,6 +71,10 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         assert evaluation["checkpoint"] == latest_checkpoint(run.directory).name, "the final policy is evaluated"
         assert evaluation["episodes"] == 3 and evaluation["task"] == results["evaluation"]["task"]
         assert entry["seeds"] == 1 and entry["return"] == returns.to_dict()
+        success = sum(evaluation["per_episode"]["success"]) / 3
+        assert entry["success_rate_over_seeds"] == {"estimate": success, "low": None, "high": None, "samples": 1}
+        assert entry["runs"][0]["steps_to_success"] == steps_to_success(run)
+        assert f"(`{run.teacher}`) | {success:.0%} [n/a] | {success:.0%} |" in table
         assert entry["book_return"] == BOOK_RETURNS.get(run.teacher)
         assert f"(`{run.teacher}`) | {returns.estimate:.2f} ± {returns.half_width:.2f} |" in table
     assert f"| {BOOK_RETURNS['fixed']:.2f} |" in table
@@ -93,3 +100,17 @@ def test_bad_bakeoff_flags_are_refused(tmp_path, capsys, flags, message):
     with pytest.raises(SystemExit) as exit_info:
         main(["bakeoff", "--out", str(tmp_path), *flags])
     assert exit_info.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_steps_to_success_pools_consecutive_evaluations_and_the_median_counts_a_seed_that_never_got_there(tmp_path):
+    run = Run("alp-gmm", 0, tmp_path)
+    rates = [0.1, 0.9, 0.5, 0.9, 0.8, 0.85, 0.7]
+    lines = [json.dumps({"step": 100 * (index + 1), "eval/success_rate": rate}) for index, rate in enumerate(rates)]
+    lines.insert(2, json.dumps({"step": 250, "train/episodes": 3.0}))  # an iteration without an evaluation
+    (tmp_path / "metrics.jsonl").write_text("\n".join(lines) + "\n")
+    # One lucky 0.9 is not enough: the first window of three at 80% or more ends at step 600.
+    assert steps_to_success(run) == 600
+    assert steps_to_success(run, target=0.9) is None
+    assert median_steps([600, None, 300]) == 600
+    assert median_steps([600, None, None]) is None
+    assert median_steps([400, 200, None, 100]) == 300

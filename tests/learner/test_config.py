@@ -62,3 +62,22 @@ def test_alp_gmm_sees_a_miss_and_a_grasp_at_opposite_ends_of_its_reward_range():
     low, high = TrainConfig(teacher="alp-gmm").teacher_params["reward_range"]
     zero_action_miss, grasp = -3.2, 9.0  # REFERENCE.md section 4; a grasp pays ~10 less the distance penalties
     assert low <= zero_action_miss < 0.5 * (low + high) < grasp <= high
+
+
+def test_ppo_overrides_are_checked_by_name_and_type():
+    config = PPOConfig().with_overrides({"entropy_coef": 0, "hidden_sizes": [32, 32], "target_kl": None})
+    assert (config.entropy_coef, config.hidden_sizes, config.target_kl) == (0.0, (32, 32), None)
+    assert isinstance(config.entropy_coef, float)
+    with pytest.raises(ValueError, match="unknown PPO hyperparameter.*entropy"):
+        PPOConfig().with_overrides({"entropy": 0.01})
+    for bad in ({"update_epochs": 2.5}, {"anneal_lr": 1}, {"learning_rate": "fast"}, {"hidden_sizes": [32, "x"]}):
+        with pytest.raises(ValueError, match="cannot be"):
+            PPOConfig().with_overrides(bad)
+    with pytest.raises(ValueError, match="update_epochs must be at least 1"):
+        PPOConfig().with_overrides({"update_epochs": 0})
+
+
+def test_teacher_overrides_go_on_top_of_the_kuka_parameters():
+    config = TrainConfig(teacher="alp-gmm", teacher_overrides={"fit_rate": 100})
+    assert config.teacher_params == {"reward_range": [-5.0, 10.0], "fit_rate": 100}
+    assert TrainConfig.from_dict(config.to_dict()) == config

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import pytest
@@ -71,3 +72,24 @@ def test_resume_if_exists_starts_a_new_run_or_continues_an_existing_one(tmp_path
 def test_resuming_needs_the_run_directory(flag, capsys):
     assert main(["train", flag]) == 2
     assert f"{flag} needs --run-dir" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--ppo", "entropy=0.01"], "unknown PPO hyperparameter(s) entropy; known: rollout_length"),
+        (["--ppo", "update_epochs=many"], "PPO hyperparameter update_epochs cannot be 'many'"),
+        (["--ppo", "entropy_coef"], "expected NAME=VALUE, got 'entropy_coef'"),
+    ],
+)
+def test_a_bad_hyperparameter_is_refused_by_name(tmp_path, capsys, flags, message):
+    with contextlib.suppress(SystemExit):
+        assert main(["train", "--run-dir", str(tmp_path / "run"), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_teacher_parameter_the_teacher_refuses_is_reported_before_training(tmp_path, capsys):
+    assert main(["train", "--teacher-param", "fit_rate=1", "--run-dir", str(tmp_path / "run")]) == 2
+    error = capsys.readouterr().err
+    assert "cannot register curriculum 'run'" in error and "fit_rate" in error
