@@ -1,0 +1,257 @@
+"""Where each teacher spent its training budget, and what the student made of it.
+
+Reads finished training runs (a bake-off's ``runs/<teacher>-seed<k>`` directories, or any ``train``
+run directory): every episode's task, success and length from the run's own teacher database, and
+its environment step from the run's metrics log. Writes plots and a markdown summary:
+
+- hardness: each parameter's distance from its easiest value on the unit scale (0 = easiest,
+  1 = hardest), its mean over training per parameter, and a task's difficulty band: the quartile of
+  its mean hardness among uniformly drawn tasks (so a uniform teacher spends a quarter of its
+  episodes in each band); the share of environment steps in each band over training, and the
+  success rate in each;
+- the budget at the student's frontier: each episode is classed by how its 20 nearest earlier
+  tasks (among the last 1,000, unit scale) went: *mastered* (90% or more succeeded), *unsolved so
+  far* (10% or less) or *learning*; the share of steps in each class over training;
+- what makes a task hard for this student: the success rate in the lower and upper half of each
+  parameter's range, over the last third of every run;
+- the in-run success on the hardest task, for reading the above against.
+
+    .venv/bin/python bench/curriculum_diagnostics.py runs/bakeoff/runs/* --out benchmarks/diagnostics
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from common.task_space import KUKA_TASK_SPACE
+from learner.metrics import METRICS_FILE
+from learner.teacher_process import DATABASE_FILE
+from teacher_service.store import Store
+
+EASIEST = KUKA_TASK_SPACE.to_unit(KUKA_TASK_SPACE.to_array(KUKA_TASK_SPACE.easiest()))
+BAND_EDGES = np.quantile(
+    np.abs(np.random.default_rng(0).random((200_000, len(EASIEST))) - EASIEST).mean(axis=1), [0.25, 0.5, 0.75]
+)
+"""Difficulty quartiles of uniformly drawn tasks: a uniform teacher puts a quarter of its tasks in each band."""
+BAND_LABELS = ("easiest quarter", "second", "third", "hardest quarter")
+WINDOWS = 10
+"""Equal slices of the step budget that shares and rates are reported over."""
+NEIGHBOURS = 20
+RECENT = 1000
+MASTERED, UNSOLVED = 0.9, 0.1
+CLASSES = ("mastered", "learning", "unsolved so far")
+
+
+@dataclass(frozen=True)
+class RunData:
+    """One run's episodes in the order its teacher learned from them."""
+
+    name: str
+    teacher: str
+    unit_tasks: np.ndarray
+    """(episodes, parameters): each task on the unit scale of its parameters."""
+    success: np.ndarray
+    length: np.ndarray
+    step: np.ndarray
+    """The environment step at which the teacher received the episode's result."""
+    total_steps: int
+    evaluation_steps: np.ndarray
+    evaluation_success: np.ndarray
+
+    @property
+    def hardness(self) -> np.ndarray:
+        """(episodes, parameters): each parameter's distance from its easiest value, 0 to 1."""
+        result: np.ndarray = np.abs(self.unit_tasks - EASIEST)
+        return result
+
+    @property
+    def band(self) -> np.ndarray:
+        """Difficulty quartile (see ``BAND_EDGES``) of the mean hardness over parameters."""
+        return np.digitize(self.hardness.mean(axis=1), BAND_EDGES)
+
+    @property
+    def window(self) -> np.ndarray:
+        return np.minimum(self.step * WINDOWS // max(self.total_steps, 1), WINDOWS - 1)
+
+
+def load_run(run_dir: Path) -> RunData:
+    store = Store(run_dir / DATABASE_FILE)
+    try:
+        [curriculum] = store.curricula()
+        results = list(store.results(curriculum.id))
+        teacher = json.loads(curriculum.spec)["teacher"]
+    finally:
+        store.close()
+    records = [json.loads(line) for line in (run_dir / METRICS_FILE).read_text().splitlines() if line.strip()]
+    times = np.array([record["time"] for record in records])
+    steps = np.array([record["step"] for record in records])
+    received = np.array([result.received_at for result in results])
+    evaluations = [(r["step"], r["eval/success_rate"]) for r in records if r.get("eval/success_rate") is not None]
+    return RunData(
+        name=run_dir.name,
+        teacher=teacher,
+        unit_tasks=KUKA_TASK_SPACE.to_unit(np.array([KUKA_TASK_SPACE.to_array(r.task) for r in results])),
+        success=np.array([bool(r.success) for r in results]),
+        length=np.array([r.length or 0 for r in results]),
+        step=np.interp(received, times, steps).astype(np.int64),
+        total_steps=int(steps[-1]),
+        evaluation_steps=np.array([step for step, _ in evaluations]),
+        evaluation_success=np.array([rate for _, rate in evaluations]),
+    )
+
+
+def frontier_classes(run: RunData) -> np.ndarray:
+    """0 mastered, 1 learning, 2 unsolved so far, -1 too little history: from the nearest earlier tasks."""
+    classes = np.full(len(run.success), -1)
+    for index in range(NEIGHBOURS, len(run.success)):
+        start = max(0, index - RECENT)
+        distances = np.linalg.norm(run.unit_tasks[start:index] - run.unit_tasks[index], axis=1)
+        nearest = np.argpartition(distances, NEIGHBOURS - 1)[:NEIGHBOURS]
+        rate = run.success[start:index][nearest].mean()
+        classes[index] = 0 if rate >= MASTERED else 2 if rate <= UNSOLVED else 1
+    return classes
+
+
+def step_shares(run: RunData, labels: np.ndarray, count: int) -> np.ndarray:
+    """(windows, count): the share of each window's environment steps whose episode has each label."""
+    shares = np.zeros((WINDOWS, count))
+    for window in range(WINDOWS):
+        inside = run.window == window
+        total = run.length[inside & (labels >= 0)].sum()
+        for label in range(count):
+            shares[window, label] = run.length[inside & (labels == label)].sum() / total if total else np.nan
+    return shares
+
+
+def band_success(run: RunData) -> np.ndarray:
+    """(windows, bands): the success rate of each difficulty band's episodes in each window."""
+    rates = np.full((WINDOWS, len(BAND_LABELS)), np.nan)
+    for window in range(WINDOWS):
+        for band in range(len(BAND_LABELS)):
+            chosen = (run.window == window) & (run.band == band)
+            if chosen.sum() >= 5:
+                rates[window, band] = run.success[chosen].mean()
+    return rates
+
+
+def plot_runs(runs: Sequence[RunData], out: Path) -> Path:
+    """One row per run: steps per band, success per band, frontier classes, hardest-task success."""
+    figure = Figure(figsize=(22, 3.2 * len(runs)), layout="constrained")
+    axes = figure.subplots(len(runs), 5, squeeze=False)
+    centres = (np.arange(WINDOWS) + 0.5) / WINDOWS
+    for row, run in zip(axes, runs, strict=True):
+        steps = centres * run.total_steps
+        hardness = run.hardness
+        for index, name in enumerate(KUKA_TASK_SPACE.names):
+            means = [hardness[run.window == window, index].mean() for window in range(WINDOWS)]
+            row[0].plot(steps, means, label=name)
+        row[0].set_ylabel(f"{run.name}\nhardness (0 easiest, 1 hardest)")
+        budget = step_shares(run, run.band, len(BAND_LABELS))
+        row[1].stackplot(steps, budget.T, labels=BAND_LABELS, alpha=0.8)
+        row[1].axhline(0.5, color="black", linewidth=0.5)
+        row[1].set_ylabel("share of steps")
+        success = band_success(run)
+        for band, label in enumerate(BAND_LABELS):
+            row[2].plot(steps, success[:, band], marker="o", label=label)
+        row[2].set_ylabel("success rate")
+        classes = step_shares(run, frontier_classes(run), len(CLASSES))
+        row[3].stackplot(steps, classes.T, labels=CLASSES, colors=("tab:green", "tab:orange", "tab:red"))
+        row[3].set_ylabel("share of steps")
+        row[4].plot(run.evaluation_steps, run.evaluation_success, color="black")
+        row[4].set_ylabel("hardest-task success")
+        for axes_ in row:
+            axes_.set_ylim(0, 1.02)
+            axes_.grid(alpha=0.3)
+    titles = (
+        "mean hardness per parameter",
+        "steps per difficulty band (uniform: 25% each)",
+        "success per difficulty band",
+        "steps at the student's frontier",
+        "in-run evaluation",
+    )
+    for axes_, title in zip(axes[0], titles, strict=True):
+        axes_.set_title(title)
+    for column, place in ((0, "upper left"), (1, "lower left"), (2, "lower right"), (3, "lower left")):
+        axes[0][column].legend(loc=place, fontsize="small")
+    for axes_ in axes[-1]:
+        axes_.set_xlabel("environment steps")
+    path = out / "curriculum_by_run.png"
+    figure.savefig(path, dpi=90)
+    return path
+
+
+def parameter_effects(runs: Sequence[RunData]) -> dict[str, tuple[float, float, int]]:
+    """Per parameter: success in the lower and upper half of its unit range, last third of every run."""
+    late = [
+        (run.unit_tasks[run.step >= 2 * run.total_steps // 3], run.success[run.step >= 2 * run.total_steps // 3])
+        for run in runs
+    ]
+    tasks = np.concatenate([tasks for tasks, _ in late])
+    success = np.concatenate([success for _, success in late])
+    effects = {}
+    for index, name in enumerate(KUKA_TASK_SPACE.names):
+        upper = tasks[:, index] >= 0.5
+        effects[name] = (float(success[~upper].mean()), float(success[upper].mean()), len(success))
+    return effects
+
+
+def summary_markdown(runs: Sequence[RunData]) -> str:
+    lines = [
+        "| run | steps per band (easiest → hardest quarter) | success per band, last third | mastered / learning / "
+        "unsolved so far (share of steps after the first 10%) | final in-run hardest-task success |",
+        "|---|---|---|---|---|",
+    ]
+    for run in runs:
+        per_band = [run.length[run.band == band].sum() / run.length.sum() for band in range(len(BAND_LABELS))]
+        late = run.step >= 2 * run.total_steps // 3
+        late_success = [
+            f"{run.success[late & (run.band == band)].mean():.0%}" if (late & (run.band == band)).sum() >= 5 else "—"
+            for band in range(len(BAND_LABELS))
+        ]
+        classes = frontier_classes(run)
+        counted = (classes >= 0) & (run.step >= run.total_steps // 10)
+        class_shares = [
+            run.length[counted & (classes == label)].sum() / run.length[counted].sum() for label in range(3)
+        ]
+        final = run.evaluation_success[-3:].mean() if len(run.evaluation_success) else float("nan")
+        lines.append(
+            f"| {run.name} | {' / '.join(f'{share:.0%}' for share in per_band)} | {' / '.join(late_success)} "
+            f"| {' / '.join(f'{share:.0%}' for share in class_shares)} | {final:.0%} (last 3 evaluations) |"
+        )
+    effects = parameter_effects(runs)
+    episodes = next(iter(effects.values()))[2]
+    lines += [
+        "",
+        f"Success in the lower and upper half of each parameter's range, last third of every run ({episodes:_} "
+        "episodes; for jp2, jp4 and bias_obj_y the upper half is the easier one):",
+        "",
+        "| parameter | lower half | upper half |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {name} | {low:.0%} | {high:.0%} |" for name, (low, high, _) in effects.items()]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", type=Path, help="run directories (each with teacher.sqlite)")
+    parser.add_argument("--out", type=Path, required=True, help="directory for the plots and summary.md")
+    args = parser.parse_args()
+    runs = [load_run(path) for path in args.runs if (path / DATABASE_FILE).exists()]
+    if not runs:
+        raise SystemExit("no run directory with a teacher database among the arguments")
+    args.out.mkdir(parents=True, exist_ok=True)
+    plot_runs(runs, args.out)
+    (args.out / "summary.md").write_text(summary_markdown(runs), encoding="utf-8")
+    print((args.out / "summary.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
