@@ -7,6 +7,9 @@ a component picked in proportion to its mean ALP, or, with probability ``random_
 uniformly from the box; before the first fit every task is uniform (the bootstrap), or, with
 ``bootstrap_spread`` set, drawn near the space's easiest task: the expert-knowledge variant that
 TeachMyAgent (Romac et al. 2021) benchmarks, for students that learn nothing from uniform tasks.
+With ``target_task_ratio`` set, that share of tasks, from the first on, is the space's hardest task:
+for a student tested there whose other tasks rarely reach all of it (the KUKA space's ``rnd_*``
+parameters shrink the block's placement range, so outer placements are rare in any spread of tasks).
 
 Two changes from the reference code, each switchable: tasks are rescaled to [0, 1] per dimension
 before the nearest-neighbour search and the fit (in raw units a parameter spanning 0.04 next to
@@ -44,6 +47,8 @@ class AlpGmmParams:
     """Results between two mixture fits; the first ``fit_rate`` tasks are uniform (bootstrap)."""
     random_task_ratio: float = 0.2
     """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
+    target_task_ratio: float = 0.0
+    """Share of tasks that are the space's hardest task (the test), bootstrap included; the rest as above."""
     min_components: int = 2
     """Fewest Gaussians tried per fit."""
     max_components: int = 10
@@ -67,6 +72,7 @@ class AlpGmmParams:
             self,
             fit_rate=as_int("fit_rate", self.fit_rate, minimum=2),
             random_task_ratio=as_float("random_task_ratio", self.random_task_ratio, 0.0, 1.0),
+            target_task_ratio=as_float("target_task_ratio", self.target_task_ratio, 0.0, 1.0),
             min_components=as_int("min_components", self.min_components, minimum=1),
             max_components=as_int("max_components", self.max_components, minimum=1),
             nb_em_init=as_int("nb_em_init", self.nb_em_init, minimum=1),
@@ -80,6 +86,11 @@ class AlpGmmParams:
         if self.min_components > self.max_components:
             raise ValueError(
                 f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
+            )
+        if self.target_task_ratio + self.random_task_ratio > 1.0:
+            raise ValueError(
+                f"target_task_ratio ({self.target_task_ratio}) and random_task_ratio ({self.random_task_ratio}) "
+                "cannot add up to more than 1"
             )
         if self.max_components > self.fit_rate:
             raise ValueError(
@@ -208,6 +219,12 @@ class AlpGmmTeacher(Teacher):
                 self._easiest_unit = space.to_unit(space.to_array(space.easiest()))
             except ValueError as error:
                 raise ValueError(f"bootstrap_spread needs an easiest value for every parameter: {error}") from None
+        self._target: np.ndarray | None = None
+        if self.params.target_task_ratio > 0:
+            try:
+                self._target = space.to_array(space.hardest())
+            except ValueError as error:
+                raise ValueError(f"target_task_ratio needs a hardest value for every parameter: {error}") from None
         self._nearest = _NearestReward(len(space), self.params.buffer_size)
         self._fit_points: deque[np.ndarray] = deque(maxlen=self.params.fit_rate)
         self._sampler: _Sampler | None = None
@@ -222,8 +239,10 @@ class AlpGmmTeacher(Teacher):
         uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + 2 * dims)
         normal_quantiles = uniforms[:, 2 : 2 + dims]
         tasks = self.space.from_unit(uniforms[:, 2 + dims :])
+        # The first uniform picks the origin: target below target_task_ratio, then uniform, then the GMM.
+        to_target = uniforms[:, 0] < self.params.target_task_ratio
         if self._sampler is not None:
-            from_gmm = uniforms[:, 0] >= self.params.random_task_ratio
+            from_gmm = uniforms[:, 0] >= self.params.target_task_ratio + self.params.random_task_ratio
             features = self._sampler.draw(uniforms[:, 1], normal_quantiles)
             tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
             origins = ["gmm" if gmm else "uniform" for gmm in from_gmm]
@@ -233,6 +252,9 @@ class AlpGmmTeacher(Teacher):
             origins = ["near-easiest"] * count
         else:
             origins = ["uniform"] * count
+        if self._target is not None:
+            tasks = np.where(to_target[:, None], self._target, tasks)
+            origins = ["target" if target else origin for target, origin in zip(to_target, origins, strict=True)]
         self.origins.update(origins)
         self._recent_origins.extend(origins)
         return [self.space.from_array(row) for row in tasks]

@@ -346,11 +346,12 @@ function renderTaskSpace() {
   const alpMax = Math.max(1e-9, ...alps);
 
   const origins = state.teacher.recent_task_origins;
-  const gmmShare = origins && origins.length ? origins.filter((o) => o === "gmm").length / origins.length : null;
-  setText(
-    "space-note",
-    `last ${results.length} results` + (gmmShare === null ? "" : ` · ${Math.round(100 * gmmShare)}% of recent tasks from the GMM`),
-  );
+  const share = (origin) => origins.filter((o) => o === origin).length / origins.length;
+  const shares = origins && origins.length
+    ? ` · ${Math.round(100 * share("gmm"))}% of recent tasks from the GMM`
+      + (origins.includes("target") ? `, ${Math.round(100 * share("target"))}% on the hardest task` : "")
+    : "";
+  setText("space-note", `last ${results.length} results${shares}`);
 
   const traces = components.map((component, k) => {
     const cov = component.covariance;

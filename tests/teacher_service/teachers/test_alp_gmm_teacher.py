@@ -87,6 +87,45 @@ def test_a_bootstrap_spread_needs_the_easiest_task() -> None:
         alp_gmm(no_anchors, bootstrap_spread=0.1)
 
 
+def test_a_target_task_ratio_sends_that_share_of_tasks_to_the_hardest_task_from_the_first_on() -> None:
+    teacher = alp_gmm(KUKA_TASK_SPACE, fit_rate=30, max_components=3, target_task_ratio=0.3)
+    hardest = KUKA_TASK_SPACE.hardest()
+    bootstrap = teacher.sample(30)
+    on_target = sum(task == hardest for task in bootstrap)
+    assert 0 < on_target < 30
+    assert teacher.state()["task_origins"] == {"gmm": 0, "uniform": 30 - on_target, "target": on_target}
+
+    job = None
+    for task in bootstrap:
+        job = teacher.update(EpisodeResult(task, float(task == hardest))) or job
+    teacher.install(job.run())
+    later = teacher.sample(2000)
+    origins = teacher.state()["task_origins"]
+    # A GMM draw clipped onto the box's corner can be the hardest task too, so count by origin.
+    assert sum(task == hardest for task in later) >= origins["target"] - on_target
+    assert origins["target"] - on_target == pytest.approx(0.3 * 2000, abs=70)
+    assert origins["uniform"] - (30 - on_target) == pytest.approx(0.2 * 2000, abs=60)
+    assert origins["gmm"] == pytest.approx(0.5 * 2000, abs=70)
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"target_task_ratio": 0.9}, "cannot add up to more than 1"),
+        ({"target_task_ratio": 1.5}, r"target_task_ratio must lie in \[0.0, 1.0\]"),
+    ],
+)
+def test_bad_target_shares_are_refused(params: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        alp_gmm(KUKA_TASK_SPACE, **params)
+
+
+def test_a_target_share_needs_the_hardest_task() -> None:
+    space = TaskSpace([Parameter("free", 0.0, 1.0)])
+    with pytest.raises(ValueError, match="target_task_ratio needs a hardest value"):
+        alp_gmm(space, target_task_ratio=0.2)
+
+
 def test_refits_fall_due_every_fit_rate_results_and_a_failed_one_is_passed_over() -> None:
     teacher = alp_gmm(fit_rate=20, max_components=3)
     due_at, jobs = [], []
