@@ -37,3 +37,21 @@ def setting(text: str) -> tuple[str, Any]:
         return name.strip(), json.loads(value)
     except json.JSONDecodeError:
         return name.strip(), value
+
+
+def add_override_flags(group: argparse._ArgumentGroup, scope: str) -> None:
+    """``--teacher-param`` and ``--ppo`` (into ``teacher_params`` and ``ppo``): repeatable NAME=VALUE
+    pairs; ``scope`` ends their help ('for this run', 'for every run')."""
+    for flag, dest, what in (
+        ("--teacher-param", "teacher_params", "a teacher parameter (e.g. fit_rate=100)"),
+        ("--ppo", "ppo", "a PPO hyperparameter, a PPOConfig field in learner/config.py (e.g. entropy_coef=0.001)"),
+    ):
+        group.add_argument(
+            flag,
+            dest=dest,
+            action="append",
+            type=setting,
+            default=[],
+            metavar="NAME=VALUE",
+            help=f"{what} {scope}, VALUE in JSON; repeatable",
+        )

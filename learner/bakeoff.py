@@ -27,7 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from common.task_space import KUKA_TASK_SPACE
-from learner.arguments import int_at_least, positive_int, setting
+from learner.arguments import add_override_flags, int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.config import LOOPS, TrainConfig
 from learner.evaluate import (
@@ -540,23 +540,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     training.add_argument(
         "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
     )
-    training.add_argument(
-        "--teacher-param",
-        dest="teacher_params",
-        action="append",
-        type=setting,
-        default=[],
-        metavar="NAME=VALUE",
-        help="a teacher parameter for every run (VALUE in JSON); repeatable",
-    )
-    training.add_argument(
-        "--ppo",
-        action="append",
-        type=setting,
-        default=[],
-        metavar="NAME=VALUE",
-        help="a PPO hyperparameter for every run (VALUE in JSON); repeatable",
-    )
+    add_override_flags(training, "for every run")
     training.add_argument(
         "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"
     )

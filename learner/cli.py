@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from learner.arguments import non_negative_int, positive_int, setting
+from learner.arguments import add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
 DEFAULTS = TrainConfig()
@@ -74,23 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
-    run.add_argument(
-        "--teacher-param",
-        action="append",
-        type=setting,
-        default=[],
-        metavar="NAME=VALUE",
-        help="a parameter of the teacher, VALUE in JSON (e.g. fit_rate=100); repeatable",
-    )
-    run.add_argument(
-        "--ppo",
-        action="append",
-        type=setting,
-        default=[],
-        metavar="NAME=VALUE",
-        help="a PPO hyperparameter, one of PPOConfig's fields in learner/config.py (e.g. entropy_coef=0.001); "
-        "repeatable",
-    )
+    add_override_flags(run, "for this run")
     run.add_argument(
         "--loop",
         choices=LOOPS,
@@ -141,7 +125,7 @@ def _config_from(args: argparse.Namespace, base: TrainConfig) -> TrainConfig:
     ppo_values = dict(args.ppo)
     if args.rollout_length is not None:
         ppo_values["rollout_length"] = args.rollout_length
-    teacher_overrides = {**base.teacher_overrides, **dict(args.teacher_param)}
+    teacher_overrides = {**base.teacher_overrides, **dict(args.teacher_params)}
     return replace(base, **overrides, teacher_overrides=teacher_overrides, ppo=base.ppo.with_overrides(ppo_values))
 
 
