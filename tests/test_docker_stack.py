@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 
 from common.schemas import API_PREFIX
@@ -57,6 +58,9 @@ TRAIN_ARGS = "--max-episode-steps=100 --rollout-length=256 --eval-every=0 --chec
 TEACHER_RUN_STEPS = 150_000
 """Long enough to still be training when the killed teacher is back (it trains on without it)."""
 WORKER_RUN_STEPS = 40_000
+
+FIGURES: dict[str, float | bool] = {}
+"""What a person would time: the build, the start, the training speed; written to ``ARTIFACTS/figures.json``."""
 
 ENGINE_START_S = 60.0
 STACK_READY_S = 240.0
@@ -210,14 +214,19 @@ def project_image(docker_env: dict[str, str]) -> str:
         build_stand_in_base(docker_env)
     wheelhouse = CACHE / "wheelhouse"
     fill_wheelhouse(wheelhouse, docker_env)
+    # An earlier build's layers are in the engine's cache: every unchanged step is reused.
+    FIGURES["build_had_layer_cache"] = image_exists(IMAGE, docker_env)
     with served_directory(wheelhouse) as wheelhouse_url:
+        started = time.monotonic()
         # --network host: the build's containers reach the wheelhouse on this machine's loopback.
         run(["docker", "build", "--network", "host", "--tag", IMAGE,
              "--build-arg", f"BASE_IMAGE={BASE_IMAGE}",
              "--build-arg", f"PIP_FIND_LINKS={wheelhouse_url}", "--build-arg", "PIP_NO_INDEX=1",
              str(ROOT)], {**docker_env, "DOCKER_BUILDKIT": "0"})  # fmt: skip
-    size = run(["docker", "image", "inspect", "--format", "{{.Size}}", IMAGE], docker_env)
-    print(f"image {IMAGE}: {int(size) / 1e9:.2f} GB")
+        FIGURES["build_seconds"] = time.monotonic() - started
+    FIGURES["image_gigabytes"] = (
+        int(run(["docker", "image", "inspect", "--format", "{{.Size}}", IMAGE], docker_env)) / 1e9
+    )
     return IMAGE
 
 
@@ -230,6 +239,8 @@ class Compose:
     def __init__(self, environment: dict[str, str], env_file: Path) -> None:
         self.environment = environment
         self.env_file = env_file
+        self.up_at = time.monotonic()
+        """When the last ``up`` was started."""
 
     def __call__(self, *arguments: str, timeout: float = 300.0) -> str:
         project = [
@@ -284,6 +295,14 @@ def curriculum(name: str, part: str = "") -> dict[str, Any]:
     return data
 
 
+def results_received(name: str) -> int:
+    """The curriculum's result count; 0 until the learner has registered it."""
+    try:
+        return int(curriculum(name)["counters"]["results_received"])
+    except httpx.HTTPError:
+        return 0
+
+
 def teacher_answers() -> bool:
     try:
         return httpx.get(f"{TEACHER_URL}/healthz", timeout=2).status_code == 200
@@ -335,6 +354,7 @@ def compose(
     env_file = write_env_file(tmp_path_factory.mktemp("compose") / "stack.env", SEED=0, TOTAL_STEPS=TEACHER_RUN_STEPS)
     stack = Compose(docker_env, env_file)
     try:
+        stack.up_at = time.monotonic()
         stack("up", "--detach", "--no-build", "--scale", "ray-worker=2", timeout=STACK_READY_S)
         yield stack
     finally:
@@ -342,6 +362,8 @@ def compose(
         with contextlib.suppress(Exception):
             (ARTIFACTS / "compose.log").write_text(stack("logs", "--no-color", "--timestamps"))
         stack("down", "--volumes", "--remove-orphans", "--timeout", "20")
+        (ARTIFACTS / "figures.json").write_text(json.dumps(FIGURES, indent=2) + "\n")
+        print(f"docker stack figures: {FIGURES}")
 
 
 @pytest.fixture(scope="module")
@@ -349,6 +371,8 @@ def teacher_kill_run(compose: Compose) -> TeacherKillRun:
     """Training with the teacher's process killed after ALP-GMM's first fit (a crash, not a ``docker stop``)."""
     observed = TeacherKillRun(compose, run_name="alp-gmm-seed0")
     learner = compose.container("learner")
+    wait_for(lambda: results_received(observed.run_name), STACK_READY_S, "the teacher's first episode result")
+    FIGURES["up_to_first_result_seconds"] = time.monotonic() - compose.up_at
     wait_for(lambda: metrics(compose, observed.run_name), STACK_READY_S, "the learner's first iteration")
     workers = compose.containers("ray-worker")
     observed.actors_per_container = {
@@ -381,6 +405,12 @@ def teacher_kill_run(compose: Compose) -> TeacherKillRun:
 
     observed.learner_state = wait_for_exit(compose, learner)
     observed.learner_log = compose.docker("logs", learner)
+    records = metrics(compose, observed.run_name)
+    iteration_steps = np.diff([0, *(record["step"] for record in records)])
+    seconds = sum(
+        steps / record["perf/steps_per_second"] for steps, record in zip(iteration_steps, records, strict=True)
+    )
+    FIGURES["training_steps_per_second"] = records[-1]["step"] / seconds
     return observed
 
 
