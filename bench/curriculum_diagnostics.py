@@ -14,7 +14,12 @@ its environment step from the run's metrics log. Writes plots and a markdown sum
   far* (10% or less) or *learning*; the share of steps in each class over training;
 - what makes a task hard for this student: the success rate in the lower and upper half of each
   parameter's range, over the last third of every run;
-- the in-run success on the hardest task, for reading the above against.
+- the in-run success on the hardest task, for reading the above against;
+- coverage of the test: the ``rnd_*`` parameters scale the uniforms that place the block (x, y,
+  yaw), so a task with ``rnd`` below 1 never puts it in the outer part of its range. The share of
+  training steps whose placement could fall in the outer tenth, against the hardest task's 10%,
+  and the final evaluation's success by where its block was placed (read from each episode's seed:
+  the environment's first draw after a seeded reset places the block).
 
     .venv/bin/python bench/curriculum_diagnostics.py runs/bakeoff/runs/* --out benchmarks/diagnostics
 """
@@ -28,9 +33,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from gymnasium.utils.seeding import np_random
 from matplotlib.figure import Figure
 
 from common.task_space import KUKA_TASK_SPACE
+from learner.bakeoff import EVALUATION_FILE
+from learner.config import TrainConfig
 from learner.metrics import METRICS_FILE
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.store import Store
@@ -43,6 +51,10 @@ BAND_EDGES = np.quantile(
 BAND_LABELS = ("easiest quarter", "second", "third", "hardest quarter")
 WINDOWS = 10
 """Equal slices of the step budget that shares and rates are reported over."""
+PLACEMENT_DRAWS = {"rnd_obj_x": 0, "rnd_obj_y": 1, "rnd_obj_ang": 2}
+"""Which of the three placement uniforms (x, y, yaw, drawn in this order) each ``rnd_*`` parameter scales."""
+PLACEMENT_EDGES = (0.5, 0.75, 0.9)
+PLACEMENT_LABELS = ("inner half", "0.5 to 0.75", "0.75 to 0.9", "outer tenth")
 NEIGHBOURS = 20
 RECENT = 1000
 MASTERED, UNSOLVED = 0.9, 0.1
@@ -55,6 +67,7 @@ class RunData:
 
     name: str
     teacher: str
+    """The teacher and any parameters that differ from training's defaults for it."""
     unit_tasks: np.ndarray
     """(episodes, parameters): each task on the unit scale of its parameters."""
     success: np.ndarray
@@ -64,6 +77,9 @@ class RunData:
     total_steps: int
     evaluation_steps: np.ndarray
     evaluation_success: np.ndarray
+    final_placements: np.ndarray
+    """(episodes, 3): the final evaluation's block placement uniforms (x, y, yaw); empty if none."""
+    final_success: np.ndarray
 
     @property
     def hardness(self) -> np.ndarray:
@@ -86,9 +102,18 @@ def load_run(run_dir: Path) -> RunData:
     try:
         [curriculum] = store.curricula()
         results = list(store.results(curriculum.id))
-        teacher = json.loads(curriculum.spec)["teacher"]
+        spec = json.loads(curriculum.spec)
     finally:
         store.close()
+    defaults = TrainConfig(teacher=spec["teacher"]).teacher_params
+    changed = {name: value for name, value in spec["params"].items() if defaults.get(name) != value}
+    teacher = " ".join([spec["teacher"], *(f"{name}={json.dumps(value)}" for name, value in changed.items())])
+    placements, final_success = np.empty((0, 3)), np.empty(0, dtype=bool)
+    if (run_dir / EVALUATION_FILE).exists():
+        evaluation = json.loads((run_dir / EVALUATION_FILE).read_text())
+        final_success = np.array(evaluation["per_episode"]["success"], dtype=bool)
+        seeds = range(evaluation["seed"], evaluation["seed"] + len(final_success))
+        placements = np.array([np_random(seed)[0].random(3) for seed in seeds])
     records = [json.loads(line) for line in (run_dir / METRICS_FILE).read_text().splitlines() if line.strip()]
     times = np.array([record["time"] for record in records])
     steps = np.array([record["step"] for record in records])
@@ -104,7 +129,31 @@ def load_run(run_dir: Path) -> RunData:
         total_steps=int(steps[-1]),
         evaluation_steps=np.array([step for step, _ in evaluations]),
         evaluation_success=np.array([rate for _, rate in evaluations]),
+        final_placements=placements,
+        final_success=final_success,
     )
+
+
+def outer_tenth_share(run: RunData) -> dict[str, float]:
+    """Per ``rnd_*`` parameter: the share of training steps whose block could land in the outer tenth
+    of its placement range, and did with this probability (``1 - 0.9 / rnd``)."""
+    shares = {}
+    for name in PLACEMENT_DRAWS:
+        scale = run.unit_tasks[:, KUKA_TASK_SPACE.names.index(name)]
+        chance = np.clip(1.0 - PLACEMENT_EDGES[-1] / np.maximum(scale, 1e-12), 0.0, None)
+        shares[name] = float(np.average(chance, weights=np.maximum(run.length, 1)))
+    return shares
+
+
+def success_by_placement(runs: Sequence[RunData], name: str) -> list[tuple[float, int]]:
+    """The final evaluations' success rate, and episode count, per placement band of one ``rnd_*`` draw."""
+    draws = np.concatenate([run.final_placements[:, PLACEMENT_DRAWS[name]] for run in runs])
+    success = np.concatenate([run.final_success for run in runs])
+    bands = np.digitize(draws, PLACEMENT_EDGES)
+    return [
+        (float(success[bands == band].mean()) if (bands == band).any() else float("nan"), int((bands == band).sum()))
+        for band in range(len(PLACEMENT_LABELS))
+    ]
 
 
 def frontier_classes(run: RunData) -> np.ndarray:
@@ -187,6 +236,26 @@ def plot_runs(runs: Sequence[RunData], out: Path) -> Path:
     return path
 
 
+def plot_placement(runs: Sequence[RunData], out: Path) -> Path:
+    """Final-evaluation success by where the block was placed, one line per teacher, one panel per draw."""
+    figure = Figure(figsize=(15, 4), layout="constrained")
+    panels = figure.subplots(1, len(PLACEMENT_DRAWS), sharey=True)
+    teachers = dict.fromkeys(run.teacher for run in runs if len(run.final_success))
+    for axes, name in zip(panels, PLACEMENT_DRAWS, strict=True):
+        for teacher in teachers:
+            members = [run for run in runs if run.teacher == teacher and len(run.final_success)]
+            rates = [rate for rate, _ in success_by_placement(members, name)]
+            axes.plot(PLACEMENT_LABELS, rates, marker="o", label=f"{teacher} ({len(members)} runs)")
+        axes.set_title(f"block placement drawn for {name}")
+        axes.set_ylim(0, 1.02)
+        axes.grid(alpha=0.3)
+    panels[0].set_ylabel("final hardest-task success")
+    panels[0].legend(loc="lower left", fontsize="small")
+    path = out / "success_by_placement.png"
+    figure.savefig(path, dpi=90)
+    return path
+
+
 def parameter_effects(runs: Sequence[RunData]) -> dict[str, tuple[float, float, int]]:
     """Per parameter: success in the lower and upper half of its unit range, last third of every run."""
     late = [
@@ -236,6 +305,24 @@ def summary_markdown(runs: Sequence[RunData]) -> str:
         "|---|---|---|",
     ]
     lines += [f"| {name} | {low:.0%} | {high:.0%} |" for name, (low, high, _) in effects.items()]
+    lines += [
+        "",
+        "Coverage of the test: the share of training steps whose block could land in the outer tenth of its "
+        "placement range (the hardest task: 10%), and the final evaluation's success by where the block was "
+        "placed, pooled over the runs of a teacher (episodes in brackets):",
+        "",
+        "| run | outer tenth of x / y / yaw, training steps |",
+        "|---|---|",
+    ]
+    for run in runs:
+        shares = outer_tenth_share(run)
+        lines.append(f"| {run.name} | {' / '.join(f'{shares[name]:.1%}' for name in PLACEMENT_DRAWS)} |")
+    groups = {run.teacher: [r for r in runs if r.teacher == run.teacher and len(r.final_success)] for run in runs}
+    lines += ["", f"| teacher | placement draw | {' | '.join(PLACEMENT_LABELS)} |", "|---|---|" + "---|" * 4]
+    for teacher, members in groups.items():
+        for name in PLACEMENT_DRAWS if members else ():
+            cells = [f"{rate:.0%} ({count})" for rate, count in success_by_placement(members, name)]
+            lines.append(f"| {teacher} ({len(members)} runs) | {name} | {' | '.join(cells)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -249,6 +336,7 @@ def main() -> None:
         raise SystemExit("no run directory with a teacher database among the arguments")
     args.out.mkdir(parents=True, exist_ok=True)
     plot_runs(runs, args.out)
+    plot_placement(runs, args.out)
     (args.out / "summary.md").write_text(summary_markdown(runs), encoding="utf-8")
     print((args.out / "summary.md").read_text())
 
