@@ -37,7 +37,7 @@ from gymnasium.utils.seeding import np_random
 from matplotlib.figure import Figure
 
 from common.task_space import KUKA_TASK_SPACE
-from learner.bakeoff import EVALUATION_FILE
+from learner.bakeoff import EVALUATION_FILE, RUNS_DIR
 from learner.config import TrainConfig
 from learner.metrics import METRICS_FILE
 from learner.teacher_process import DATABASE_FILE
@@ -119,8 +119,9 @@ def load_run(run_dir: Path) -> RunData:
     steps = np.array([record["step"] for record in records])
     received = np.array([result.received_at for result in results])
     evaluations = [(r["step"], r["eval/success_rate"]) for r in records if r.get("eval/success_rate") is not None]
+    bakeoff = run_dir.parent.parent.name if run_dir.parent.name == RUNS_DIR else None
     return RunData(
-        name=run_dir.name,
+        name=f"{bakeoff}/{run_dir.name}" if bakeoff else run_dir.name,
         teacher=teacher,
         unit_tasks=KUKA_TASK_SPACE.to_unit(np.array([KUKA_TASK_SPACE.to_array(r.task) for r in results])),
         success=np.array([bool(r.success) for r in results]),
