@@ -19,7 +19,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -287,8 +287,10 @@ class TeacherResult:
 
     @property
     def success_over_seeds(self) -> Interval:
-        """The mean of the seeds' success rates, with a Student-t interval over seeds: what a new seed may give."""
-        return mean_interval(self.seed_success_rates)
+        """The mean of the seeds' success rates, with a Student-t interval over seeds (cut to [0, 1]):
+        what a new seed may give."""
+        interval = mean_interval(self.seed_success_rates)
+        return replace(interval, low=max(interval.low, 0.0), high=min(interval.high, 1.0))
 
     @property
     def return_over_seeds(self) -> Interval:

@@ -8,8 +8,19 @@ import imageio.v3 as iio
 import pytest
 
 from common.cli import main
-from learner.bakeoff import BOOK_RETURNS, Run, learning_curve, median_steps, plan_runs, steps_to_success
+from common.task_space import KUKA_TASK_SPACE
+from common.trajectory import EpisodeStats
+from learner.bakeoff import (
+    BOOK_RETURNS,
+    Run,
+    TeacherResult,
+    learning_curve,
+    median_steps,
+    plan_runs,
+    steps_to_success,
+)
 from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.evaluate import EvaluationResult
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
@@ -114,3 +125,16 @@ def test_steps_to_success_pools_consecutive_evaluations_and_the_median_counts_a_
     assert median_steps([600, None, 300]) == 600
     assert median_steps([600, None, None]) is None
     assert median_steps([400, 200, None, 100]) == 300
+
+
+def test_the_success_interval_over_seeds_stays_within_zero_and_one(tmp_path):
+    task = KUKA_TASK_SPACE.hardest()
+
+    def evaluation(successes: list[bool]) -> EvaluationResult:
+        return EvaluationResult(task, 0, tuple(EpisodeStats(task, 1.0, success, 800) for success in successes))
+
+    runs = (Run("alp-gmm", 0, tmp_path / "a"), Run("alp-gmm", 1, tmp_path / "b"))
+    result = TeacherResult("alp-gmm", runs, (evaluation([True] * 9 + [False]), evaluation([True] * 10)))
+    interval = result.success_over_seeds
+    assert interval.estimate == pytest.approx(0.95) and interval.high == 1.0 and 0.0 < interval.low < 0.95
+    assert result.seed_success_rates == [0.9, 1.0]
