@@ -59,6 +59,9 @@ TEACHER_RUN_STEPS = 150_000
 """Long enough to still be training when the killed teacher is back (it trains on without it)."""
 WORKER_RUN_STEPS = 40_000
 
+WHEELHOUSE_PORT = 38_271
+"""The wheelhouse's URL is a build argument, and a changed one misses the layer cache at every install:
+so the same port each run."""
 FIGURES: dict[str, float | bool] = {}
 """What a person would time: the build, the start, the training speed; written to ``ARTIFACTS/figures.json``."""
 
@@ -188,12 +191,13 @@ def fill_wheelhouse(wheelhouse: Path, environment: dict[str, str]) -> None:
 
 
 @contextlib.contextmanager
-def served_directory(directory: Path) -> Iterator[str]:
+def served_directory(directory: Path, port: int) -> Iterator[str]:
     """A static HTTP server for ``directory`` on the loopback; its directory listing is what pip's
-    ``--find-links`` reads."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    ``--find-links`` reads. On ``port`` if it is free, else on any."""
+    if not port_is_free(port):
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
     server = subprocess.Popen(
         [sys.executable, "-m", "http.server", "--bind", "127.0.0.1", "--directory", str(directory), str(port)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -216,7 +220,7 @@ def project_image(docker_env: dict[str, str]) -> str:
     fill_wheelhouse(wheelhouse, docker_env)
     # An earlier build's layers are in the engine's cache: every unchanged step is reused.
     FIGURES["build_had_layer_cache"] = image_exists(IMAGE, docker_env)
-    with served_directory(wheelhouse) as wheelhouse_url:
+    with served_directory(wheelhouse, WHEELHOUSE_PORT) as wheelhouse_url:
         started = time.monotonic()
         # --network host: the build's containers reach the wheelhouse on this machine's loopback.
         run(["docker", "build", "--network", "host", "--tag", IMAGE,
