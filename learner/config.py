@@ -99,11 +99,13 @@ TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed")
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
-    "alp-gmm": {"reward_range": [-5.0, 10.0]},
+    "alp-gmm": {"reward_range": [-5.0, 10.0], "target_task_ratio": 0.2},
 }
 """Teacher parameters for the KUKA curriculum, on top of each teacher's own defaults. ALP-GMM
 clusters learning progress together with task coordinates rescaled to [0, 1]; mapping the scaled
-return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on the same scale."""
+return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on the same scale.
+A fifth of its tasks are the hardest task: its other tasks rarely place the block in the outer
+part of the test's range, and without them one seed in three ended under 80% (BENCHMARKS.md, issue 18)."""
 
 
 @dataclass(frozen=True)

@@ -79,5 +79,5 @@ def test_ppo_overrides_are_checked_by_name_and_type():
 
 def test_teacher_overrides_go_on_top_of_the_kuka_parameters():
     config = TrainConfig(teacher="alp-gmm", teacher_overrides={"fit_rate": 100})
-    assert config.teacher_params == {"reward_range": [-5.0, 10.0], "fit_rate": 100}
+    assert config.teacher_params == {"reward_range": [-5.0, 10.0], "target_task_ratio": 0.2, "fit_rate": 100}
     assert TrainConfig.from_dict(config.to_dict()) == config
