@@ -21,11 +21,12 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from tqdm import tqdm
 
+from common.schemas import TeacherKind
 from common.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_override_flags, int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
@@ -347,9 +348,22 @@ def _format_setting(name: str, value: Any) -> str:
     return f"{name.replace('_', ' ')} {value}"
 
 
+def registration_params(teacher: str, settings: dict[str, Any]) -> dict[str, Any]:
+    """What ``train`` registers the teacher's curriculum with: the KUKA defaults, then the bake-off's overrides."""
+    overrides = settings.get("teacher_params", {})
+    return TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=overrides).teacher_params
+
+
 def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int) -> str:
     trained = ", ".join(
-        _format_setting(name, value) for name, value in settings.items() if name != "total_steps" and value != {}
+        _format_setting(name, value)
+        for name, value in settings.items()
+        if name not in ("total_steps", "teacher_params") and value != {}
+    )
+    registered = "; ".join(
+        f"{TEACHER_LABELS[result.teacher]} " + ", ".join(f"{key}={json.dumps(value)}" for key, value in params.items())
+        for result in results
+        if (params := registration_params(result.teacher, settings))
     )
     seeds = max(len(result.runs) for result in results)
     lines = [
@@ -359,6 +373,11 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         f"steps with the same settings ({trained}) and hyperparameters. Each final policy then played "
         f"{episodes} deterministic episodes on the hardest task (episode seeds {seed} to {seed + episodes - 1}, "
         "the same for every run).",
+        *(
+            [f"Teachers registered with these parameters on top of their own defaults: {registered}."]
+            if registered
+            else []
+        ),
         "",
         "## Between seeds: what a new seed may give",
         "",

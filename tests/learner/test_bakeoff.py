@@ -17,6 +17,7 @@ from learner.bakeoff import (
     learning_curve,
     median_steps,
     plan_runs,
+    results_markdown,
     steps_to_success,
 )
 from learner.checkpoint import latest_checkpoint, load_checkpoint
@@ -89,6 +90,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         assert entry["book_return"] == BOOK_RETURNS.get(run.teacher)
         assert f"(`{run.teacher}`) | {returns.estimate:.2f} ± {returns.half_width:.2f} |" in table
     assert f"| {BOOK_RETURNS['fixed']:.2f} |" in table
+    assert "registered with" not in table, "fixed and random take no KUKA parameters"
     assert iio.imread(out / "learning_curves.png").ndim == 3
 
     # Run again: every run is finished and evaluated, so nothing is trained or evaluated anew.
@@ -138,3 +140,17 @@ def test_the_success_interval_over_seeds_stays_within_zero_and_one(tmp_path):
     interval = result.success_over_seeds
     assert interval.estimate == pytest.approx(0.95) and interval.high == 1.0 and 0.0 < interval.low < 0.95
     assert result.seed_success_rates == [0.9, 1.0]
+
+
+def test_the_report_names_what_each_teacher_was_registered_with(tmp_path):
+    task = KUKA_TASK_SPACE.hardest()
+    evaluation = EvaluationResult(task, 0, (EpisodeStats(task, 1.0, True, 800),))
+    results = [
+        TeacherResult(teacher, (Run(teacher, 0, tmp_path / teacher),), (evaluation,))
+        for teacher in ("alp-gmm", "fixed")
+    ]
+    settings = {"total_steps": 1000, "curve_every": 25, "curve_episodes": 20, "teacher_params": {}}
+    report = results_markdown(results, settings, episodes=1, seed=0)
+    registered = next(line for line in report.splitlines() if "registered with" in line)
+    assert registered.endswith("defaults: ALP-GMM reward_range=[-5.0, 10.0], target_task_ratio=0.2.")
+    assert "hardest task only" not in registered and "teacher params" not in report
