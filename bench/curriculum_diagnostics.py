@@ -106,8 +106,9 @@ def load_run(run_dir: Path) -> RunData:
     finally:
         store.close()
     defaults = TrainConfig(teacher=spec["teacher"]).teacher_params
-    changed = {name: value for name, value in spec["params"].items() if defaults.get(name) != value}
-    teacher = " ".join([spec["teacher"], *(f"{name}={json.dumps(value)}" for name, value in changed.items())])
+    changed = [f"{name}={json.dumps(value)}" for name, value in spec["params"].items() if defaults.get(name) != value]
+    changed += [f"no {name}" for name in defaults if name not in spec["params"]]
+    teacher = " ".join([spec["teacher"], *changed])
     placements, final_success = np.empty((0, 3)), np.empty(0, dtype=bool)
     if (run_dir / EVALUATION_FILE).exists():
         evaluation = json.loads((run_dir / EVALUATION_FILE).read_text())
