@@ -361,7 +361,7 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         if name not in ("total_steps", "teacher_params") and value != {}
     )
     registered = "; ".join(
-        f"{TEACHER_LABELS[result.teacher]} " + ", ".join(f"{key}={json.dumps(value)}" for key, value in params.items())
+        _format_setting(TEACHER_LABELS[result.teacher], params)
         for result in results
         if (params := registration_params(result.teacher, settings))
     )

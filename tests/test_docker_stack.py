@@ -38,6 +38,7 @@ import numpy as np
 import pytest
 
 from common.schemas import API_PREFIX
+from teacher_service.process import free_port
 
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(1500)]
 
@@ -195,9 +196,7 @@ def served_directory(directory: Path, port: int) -> Iterator[str]:
     """A static HTTP server for ``directory`` on the loopback; its directory listing is what pip's
     ``--find-links`` reads. On ``port`` if it is free, else on any."""
     if not port_is_free(port):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            port = probe.getsockname()[1]
+        port = free_port()
     server = subprocess.Popen(
         [sys.executable, "-m", "http.server", "--bind", "127.0.0.1", "--directory", str(directory), str(port)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

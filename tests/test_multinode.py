@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -23,6 +22,7 @@ import httpx
 import pytest
 
 from common.schemas import API_PREFIX
+from teacher_service.process import free_port
 
 pytestmark = [pytest.mark.multinode, pytest.mark.timeout(420)]
 
@@ -33,12 +33,6 @@ TRAIN_TIMEOUT_S = 300.0
 STOP_TIMEOUT_S = 45.0
 RAY_READY_LINE = "This command will now block forever"
 """What ``ray start --block`` prints once its node is up and registered with the head."""
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def process_environment(teacher_token: str | None = None) -> dict[str, str]:
