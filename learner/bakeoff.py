@@ -187,7 +187,7 @@ def _logged_steps(run: Run) -> int:
     return int(records[-1]["step"]) if records else 0
 
 
-def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_before: int) -> bool:
+def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_runs: int) -> bool:
     """Run one training child to its end; False when it was interrupted (Ctrl-C).
 
     While it runs this process ignores Ctrl-C, which reaches the child too: the child finishes its
@@ -207,7 +207,7 @@ def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_before: i
             child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
             while child.poll() is None:
                 time.sleep(POLL_S)
-                progress.update(steps_before + _logged_steps(run) - progress.n)
+                progress.update(steps_of_other_runs + _logged_steps(run) - progress.n)
     finally:
         signal.signal(signal.SIGINT, previous)
     if interrupted:
@@ -586,11 +586,16 @@ def _bakeoff(args: argparse.Namespace) -> int:
     runs = plan_runs(args.out, teachers, args.seeds)
     done = {run.name: run.steps_done() for run in runs}
 
+    def counted(run: Run) -> int:
+        return min(done[run.name], int(args.total_steps))
+
+    # Steps trained in earlier sessions start the bar, so its rate and ETA count this session's steps only.
     total = len(runs) * args.total_steps
-    with tqdm(total=total, unit="step", unit_scale=True, desc="bake-off", dynamic_ncols=True) as progress:
-        for index, run in enumerate(runs):
-            steps_before = sum(min(done[r.name], args.total_steps) for r in runs[:index])
-            progress.update(steps_before + min(done[run.name], args.total_steps) - progress.n)
+    already = sum(counted(run) for run in runs)
+    with tqdm(
+        total=total, initial=already, unit="step", unit_scale=True, desc="bake-off", dynamic_ncols=True
+    ) as progress:
+        for run in runs:
             if done[run.name] >= args.total_steps:
                 progress.write(f"{run.name}: finished at {done[run.name]:_} steps, skipped")
                 continue
@@ -604,7 +609,8 @@ def _bakeoff(args: argparse.Namespace) -> int:
                 f"(log: {run.directory / TRAIN_LOG})"
             )
             command = train_command(run, args.total_steps, settings, resume, args.ray_address)
-            finished = train_run(run, command, progress, steps_before) and run.steps_done() >= args.total_steps
+            steps_of_other_runs = sum(counted(other) for other in runs if other is not run)
+            finished = train_run(run, command, progress, steps_of_other_runs) and run.steps_done() >= args.total_steps
             if not finished:
                 progress.write("interrupted; run the same command again to resume")
                 return 130
