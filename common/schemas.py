@@ -10,6 +10,7 @@ import math
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from typing_extensions import Self
 
 from common.task_space import Parameter, Task, TaskSpace
 
@@ -53,16 +54,14 @@ class ParameterSpec(_Request):
         )
 
 
-class CurriculumSpec(_Request):
-    """What defines a curriculum: two specs are the same curriculum exactly when they are equal."""
+class CurriculumSpecBase(_Request):
+    """What every curriculum has besides its teacher: the task space and the seed."""
 
-    teacher: TeacherKind
     space: list[ParameterSpec] = Field(min_length=1, max_length=64)
-    params: dict[str, Any] = Field(default_factory=dict, description="Teacher hyperparameters; see the teacher kinds.")
     seed: int = Field(default=0, ge=0, le=MAX_SEED)
 
     @model_validator(mode="after")
-    def _space_is_valid(self) -> CurriculumSpec:
+    def _space_is_valid(self) -> Self:
         space = self.task_space()
         for parameter in space.parameters:
             if not math.isfinite(parameter.high - parameter.low):
@@ -71,6 +70,17 @@ class CurriculumSpec(_Request):
 
     def task_space(self) -> TaskSpace:
         return TaskSpace(p.to_parameter() for p in self.space)
+
+
+class CurriculumSpec(CurriculumSpecBase):
+    """What defines a curriculum: two specs are the same curriculum exactly when they are equal.
+
+    The service checks ``params`` against the teacher kind's own model (``GET /docs`` shows each
+    kind's parameters with their bounds); here they stay a plain mapping so a client needs no
+    teacher code."""
+
+    teacher: TeacherKind
+    params: dict[str, Any] = Field(default_factory=dict, description="Teacher hyperparameters; see the teacher kinds.")
 
 
 class CurriculumCounters(BaseModel):

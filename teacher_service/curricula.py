@@ -27,7 +27,6 @@ from tqdm import tqdm
 from common.schemas import (
     CurriculumCounters,
     CurriculumInfo,
-    CurriculumSpec,
     CurriculumState,
     FitEvent,
     IssuedTask,
@@ -37,6 +36,7 @@ from common.schemas import (
 )
 from common.task_space import Task
 from teacher_service.core.config import Settings
+from teacher_service.curriculum_spec import TypedSpec, stored_spec
 from teacher_service.fits import FitOutcome, FitRunner, run_fit
 from teacher_service.metrics import ServiceMetrics
 from teacher_service.store import (
@@ -80,7 +80,7 @@ class Curriculum:
         self,
         curriculum_id: int,
         name: str,
-        spec: CurriculumSpec,
+        spec: TypedSpec,
         created_at: float,
         store: Store,
         fits: FitRunner,
@@ -90,6 +90,7 @@ class Curriculum:
         self.id = curriculum_id
         self.name = name
         self.spec = spec
+        self.config = spec.to_client_spec()
         self.space = spec.task_space()
         self.teacher: Teacher = make_teacher(spec.teacher, self.space, spec.seed, spec.params)
         self.created_at = created_at
@@ -273,7 +274,7 @@ class Curriculum:
         now = time.time()
         return CurriculumInfo(
             name=self.name,
-            config=self.spec,
+            config=self.config,
             created_at=self.created_at,
             counters=CurriculumCounters(
                 tasks_issued=self.tasks_issued,
@@ -410,7 +411,7 @@ class CurriculumRegistry:
         except KeyError:
             raise UnknownCurriculum(name) from None
 
-    async def create(self, name: str, spec: CurriculumSpec) -> tuple[Curriculum, bool]:
+    async def create(self, name: str, spec: TypedSpec) -> tuple[Curriculum, bool]:
         """Create a curriculum, or return the identical one that exists (``created`` False).
 
         Raises ``CurriculumConflict`` when the name holds a different one, ``ValueError`` when the
@@ -438,7 +439,7 @@ class CurriculumRegistry:
         return Curriculum(
             stored.id,
             stored.name,
-            CurriculumSpec.model_validate_json(stored.spec),
+            stored_spec(stored.spec),
             stored.created_at,
             self._store,
             self._fits,

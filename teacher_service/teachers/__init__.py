@@ -12,21 +12,24 @@ from typing import Any
 
 from common.task_space import TaskSpace
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
-from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher, TeacherFactory
+from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.manual import ManualTeacher
+from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
 
-TEACHER_KINDS: Mapping[str, TeacherFactory] = MappingProxyType(
+TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
     {teacher.kind: teacher for teacher in (AlpGmmTeacher, ManualTeacher, RandomTeacher, FixedTeacher)}
 )
 
 
-def make_teacher(kind: str, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> Teacher:
+def make_teacher(
+    kind: str, space: TaskSpace, seed: int, params: TeacherParams | Mapping[str, Any] | None = None
+) -> Teacher:
     """Build a teacher, or raise ``ValueError`` naming the unknown kind or the bad parameter."""
     factory = TEACHER_KINDS.get(kind)
     if factory is None:
         raise ValueError(f"unknown teacher kind {kind!r}; expected one of {sorted(TEACHER_KINDS)}")
-    return factory(space, seed, {} if params is None else params)
+    return factory(space, seed, params)
 
 
-__all__ = ["TEACHER_KINDS", "EpisodeResult", "FitJob", "Teacher", "make_teacher"]
+__all__ = ["TEACHER_KINDS", "EpisodeResult", "FitJob", "Teacher", "TeacherParams", "make_teacher"]

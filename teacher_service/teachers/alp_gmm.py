@@ -22,9 +22,10 @@ import functools
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Annotated, Any, cast
 
 import numpy as np
+from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
 from sklearn.mixture import GaussianMixture
@@ -32,7 +33,7 @@ from sklearn.mixture import GaussianMixture
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
-from teacher_service.teachers.params import as_bool, as_float, as_int, as_range, parse_params, store
+from teacher_service.teachers.params import FiniteFloat, TeacherParams
 
 MIN_HISTORY_FOR_ALP = 6
 """ALP is 0 until this many earlier tasks exist, as in the reference code."""
@@ -41,48 +42,39 @@ RECENT_ORIGINS = 1000
 """How many recent tasks' origins (GMM or uniform) the state reports."""
 
 
-@dataclass(frozen=True)
-class AlpGmmParams:
-    fit_rate: int = 250
+MAX_FIT_RATE = 2000
+MAX_COMPONENTS = 16
+MAX_EM_INITS = 5
+"""Together these bound one fit: at most 2,000 points, 16 candidate sizes, 5 EM restarts each."""
+
+
+class AlpGmmParams(TeacherParams):
+    fit_rate: int = Field(default=250, ge=2, le=MAX_FIT_RATE)
     """Results between two mixture fits; the first ``fit_rate`` tasks are uniform (bootstrap)."""
-    random_task_ratio: float = 0.2
+    random_task_ratio: float = Field(default=0.2, ge=0.0, le=1.0)
     """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
-    target_task_ratio: float = 0.0
+    target_task_ratio: float = Field(default=0.0, ge=0.0, le=1.0)
     """Share of tasks that are the space's hardest task (the test), bootstrap included; the rest as above."""
-    min_components: int = 2
+    min_components: int = Field(default=2, ge=1, le=MAX_COMPONENTS)
     """Fewest Gaussians tried per fit."""
-    max_components: int = 10
+    max_components: int = Field(default=10, ge=1, le=MAX_COMPONENTS)
     """Most Gaussians tried per fit; the candidate with the lowest AIC wins."""
-    nb_em_init: int = 1
+    nb_em_init: int = Field(default=1, ge=1, le=MAX_EM_INITS)
     """EM restarts per candidate mixture."""
-    buffer_size: int = 500
+    buffer_size: int = Field(default=500, ge=1, le=10_000)
     """Newest tasks scanned directly before joining the k-d tree that answers nearest-neighbour
     queries; affects speed only."""
     rescale_tasks: bool = True
     """Measure distances and fit mixtures on tasks rescaled to [0, 1] per dimension."""
-    reward_range: list[float] | None = None
+    reward_range: Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)] | None = None
     """[low, high] mapped onto [0, 1] (clipped) before ALP is computed; null keeps raw rewards.
     ALP values in the state are in these normalised units when set."""
-    bootstrap_spread: float | None = None
+    bootstrap_spread: Annotated[FiniteFloat, Field(ge=0.0, le=10.0)] | None = None
     """Null: bootstrap tasks are uniform. Otherwise they come from a Gaussian on the easiest task with
     this standard deviation per dimension, in units of the dimension's width, clipped to the box."""
 
-    def __post_init__(self) -> None:
-        store(
-            self,
-            fit_rate=as_int("fit_rate", self.fit_rate, minimum=2),
-            random_task_ratio=as_float("random_task_ratio", self.random_task_ratio, 0.0, 1.0),
-            target_task_ratio=as_float("target_task_ratio", self.target_task_ratio, 0.0, 1.0),
-            min_components=as_int("min_components", self.min_components, minimum=1),
-            max_components=as_int("max_components", self.max_components, minimum=1),
-            nb_em_init=as_int("nb_em_init", self.nb_em_init, minimum=1),
-            buffer_size=as_int("buffer_size", self.buffer_size, minimum=1),
-            rescale_tasks=as_bool("rescale_tasks", self.rescale_tasks),
-            reward_range=as_range("reward_range", self.reward_range),
-            bootstrap_spread=(
-                None if self.bootstrap_spread is None else as_float("bootstrap_spread", self.bootstrap_spread, low=0.0)
-            ),
-        )
+    @model_validator(mode="after")
+    def _consistent(self) -> AlpGmmParams:
         if self.min_components > self.max_components:
             raise ValueError(
                 f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
@@ -97,6 +89,9 @@ class AlpGmmParams:
                 f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
                 "each fit sees fit_rate points"
             )
+        if self.reward_range is not None and not self.reward_range[0] < self.reward_range[1]:
+            raise ValueError(f"reward_range must have low < high, got {self.reward_range}")
+        return self
 
 
 @dataclass(frozen=True)
@@ -208,11 +203,11 @@ class AlpGmmTeacher(Teacher):
     """Absolute-learning-progress teacher over a Gaussian mixture (see the module docstring)."""
 
     kind = "alp-gmm"
+    Params = AlpGmmParams
     params: AlpGmmParams
 
-    def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
-        super().__init__(space, seed)
-        self.params = parse_params(self.kind, AlpGmmParams, params)
+    def __init__(self, space: TaskSpace, seed: int, params: AlpGmmParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
         self._easiest_unit: np.ndarray | None = None
         if self.params.bootstrap_spread is not None:
             try:

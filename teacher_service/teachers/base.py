@@ -20,9 +20,10 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from common.task_space import Task, TaskSpace
+from teacher_service.teachers.params import TeacherParams
 
 
 @dataclass(frozen=True)
@@ -57,14 +58,17 @@ class Teacher(ABC):
     """
 
     kind: str
-    params: Any
-    """The kind's parameters: a frozen dataclass of JSON-ready values."""
+    Params: ClassVar[type[TeacherParams]]
+    """The kind's parameter model: typed, bounded, documented (``params.TeacherParams``)."""
+    params: TeacherParams
 
-    def __init__(self, space: TaskSpace, seed: int) -> None:
+    def __init__(self, space: TaskSpace, seed: int, params: TeacherParams | Mapping[str, Any] | None = None) -> None:
+        """``params`` may be the kind's model, a mapping of name to value, or ``None`` for the defaults."""
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         self.space = space
         self.seed = seed
+        self.params = self.Params.parse(params)
         self.tasks_sampled = 0
         self.results_seen = 0
 
@@ -108,7 +112,7 @@ class Teacher(ABC):
         return {
             "kind": self.kind,
             "seed": self.seed,
-            "params": dataclasses.asdict(self.params),
+            "params": self.params.model_dump(),
             "tasks_sampled": self.tasks_sampled,
             "results_seen": self.results_seen,
             **self._describe(),
@@ -125,6 +129,3 @@ class Teacher(ABC):
     @abstractmethod
     def _describe(self) -> dict[str, Any]:
         """The kind's own JSON-ready state entries."""
-
-
-TeacherFactory = Callable[[TaskSpace, int, Mapping[str, Any]], Teacher]

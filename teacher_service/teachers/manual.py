@@ -12,12 +12,13 @@ import math
 import statistics
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
+
+from pydantic import Field, model_validator
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
-from teacher_service.teachers.params import as_float, as_int, as_task, in_space, parse_params, store
+from teacher_service.teachers.params import FiniteFloat, TaskParam, TeacherParams, in_space
 
 LESSON_STEPS: dict[str, float] = {
     "rnd_obj_x": 0.05,
@@ -35,6 +36,10 @@ SNAP = 1e-9
 """Steps that land this close to the hardest value count as arrived (0.05 sums are inexact)."""
 
 
+MAX_LESSONS = 1000
+"""Most lessons a plan may have: the plan is built when the curriculum is created."""
+
+
 def next_lesson(lesson: Task, hardest: Task) -> Task:
     """The book's ``increase_difficulty``: one lesson harder, never past the hardest values."""
     harder = dict(lesson)
@@ -47,45 +52,56 @@ def next_lesson(lesson: Task, hardest: Task) -> Task:
 
 
 def lesson_plan(start: Task, hardest: Task) -> list[Task]:
-    """Every lesson from ``start`` up to and including the hardest task."""
+    """Every lesson from ``start`` up to and including the hardest task.
+
+    Raises ``ValueError`` when the plan would exceed ``MAX_LESSONS``, or when a step is lost to
+    floating-point rounding at the parameters' magnitude (the plan would never arrive)."""
+    lessons = 1 + max(
+        math.ceil(max(abs(hardest[name] - start[name]) - SNAP, 0.0) / step) for name, step in LESSON_STEPS.items()
+    )
+    if lessons > MAX_LESSONS:
+        raise ValueError(
+            f"the lesson plan from {start} to {hardest} would have {lessons} lessons, more than {MAX_LESSONS}: "
+            "choose a start closer to the hardest task or a narrower space"
+        )
     plan = [dict(start)]
     while plan[-1] != hardest:
+        if len(plan) == lessons:
+            raise ValueError(
+                f"the lesson plan from {start} to {hardest} does not arrive: steps of "
+                f"{min(LESSON_STEPS.values())} are lost to rounding at these parameter values"
+            )
         plan.append(next_lesson(plan[-1], hardest))
     return plan
 
 
-@dataclass(frozen=True)
-class ManualParams:
-    start: Task | None = None
-    """First lesson; None starts at the space's easiest point, as the book does."""
-    threshold: float = 5.5
+class ManualParams(TeacherParams):
+    start: TaskParam | None = None
+    """First lesson; null starts at the space's easiest point, as the book does."""
+    threshold: FiniteFloat = 5.5
     """Move on when the current lesson's recent mean reward exceeds this (the book's value)."""
-    window: int = 100
+    window: int = Field(default=100, ge=1, le=10_000)
     """Recent episodes of the current lesson that are averaged (RLlib's smoothing window, which
     the book's callback read)."""
-    min_episodes: int = 50
+    min_episodes: int = Field(default=50, ge=1, le=10_000)
     """Episodes of the current lesson needed before it can end, so one lucky streak does not."""
 
-    def __post_init__(self) -> None:
-        store(
-            self,
-            start=as_task("start", self.start),
-            threshold=as_float("threshold", self.threshold),
-            window=as_int("window", self.window, minimum=1),
-            min_episodes=as_int("min_episodes", self.min_episodes, minimum=1),
-        )
+    @model_validator(mode="after")
+    def _consistent(self) -> ManualParams:
         if self.min_episodes > self.window:
             raise ValueError(f"min_episodes ({self.min_episodes}) cannot exceed window ({self.window})")
+        return self
 
 
 class ManualTeacher(Teacher):
     """Hands out the current lesson's task and moves on when the student is good enough at it."""
 
     kind = "manual"
+    Params = ManualParams
+    params: ManualParams
 
-    def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
-        super().__init__(space, seed)
-        self.params = parse_params(self.kind, ManualParams, params)
+    def __init__(self, space: TaskSpace, seed: int, params: ManualParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
         expected = {*LESSON_STEPS, LAST_PARAMETER}
         if set(space.names) != expected:
             raise ValueError(

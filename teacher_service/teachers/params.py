@@ -1,84 +1,49 @@
-"""Checks for teacher parameters arriving as untrusted JSON-like data.
+"""The base of every teacher kind's parameters: a typed, bounded pydantic model.
 
-Each kind declares its parameters as a frozen dataclass whose ``__post_init__`` cleans its fields
-with the helpers below; every error names the parameter so an HTTP layer can pass it on verbatim.
+Each kind declares its parameters as a ``TeacherParams`` subclass with a bound on every number, so
+that one request cannot make the teacher cost more than those bounds allow (memory, the number of
+lessons, the work of one fit). The service puts these models in its request schema, which makes
+``/docs`` show each field's bounds, default and doc, and turns a bad value into a 422 naming it.
+Checks that need the task space (a task-valued parameter lying inside it) run in the teacher.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, TypeVar
+from collections.abc import Mapping
+from typing import Annotated, Any
 
+from pydantic import BaseModel, ConfigDict, Field
+from typing_extensions import Self
+
+from common.schemas import FiniteFloat
 from common.task_space import Task, TaskSpace
 
-if TYPE_CHECKING:
-    from _typeshed import DataclassInstance
+TaskParam = Annotated[
+    dict[Annotated[str, Field(max_length=64)], FiniteFloat],
+    Field(max_length=64, description="A task: parameter name to value, inside the curriculum's space."),
+]
+"""A task-valued parameter; ``in_space`` checks it against the teacher's space."""
 
-Params = TypeVar("Params", bound="DataclassInstance")
-
-
-def parse_params(kind: str, schema: type[Params], raw: Mapping[str, Any] | None) -> Params:
-    """Build ``schema`` from ``raw``, rejecting names it does not declare."""
-    if raw is None:
-        raw = {}
-    if not isinstance(raw, Mapping):
-        raise ValueError(f"{kind} parameters must be a mapping of name to value, got {type(raw).__name__}")
-    known = [field.name for field in dataclasses.fields(schema)]
-    unknown = sorted(set(raw) - set(known))
-    if unknown:
-        raise ValueError(f"unknown {kind} parameter(s) {unknown}; known: {known}")
-    return schema(**raw)
+__all__ = ["FiniteFloat", "TaskParam", "TeacherParams", "in_space"]
 
 
-def store(params: Any, **cleaned: Any) -> None:
-    """Write cleaned values onto a frozen dataclass from its ``__post_init__``."""
-    for name, value in cleaned.items():
-        object.__setattr__(params, name, value)
+class TeacherParams(BaseModel):
+    """Immutable, unknown names refused, no type coercion (``true`` is not 1, ``"7"`` is not 7)."""
 
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, use_attribute_docstrings=True)
 
-def as_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be at least {minimum}, got {value}")
-    return int(value)
+    @classmethod
+    def parse(cls, raw: TeacherParams | Mapping[str, Any] | None) -> Self:
+        """The parameters from a model of this kind, a mapping of name to value, or ``None`` (defaults).
 
-
-def as_float(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    if not low <= value <= high:
-        raise ValueError(f"{name} must lie in [{low}, {high}], got {value}")
-    return float(value)
-
-
-def as_bool(name: str, value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise ValueError(f"{name} must be true or false, got {value!r}")
-    return value
-
-
-def as_range(name: str, value: Any) -> list[float] | None:
-    """``None`` or ``[low, high]`` with low < high."""
-    if value is None:
-        return None
-    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 2:
-        raise ValueError(f"{name} must be null or a pair [low, high], got {value!r}")
-    low, high = (as_float(f"{name}[{i}]", v) for i, v in enumerate(value))
-    if not low < high:
-        raise ValueError(f"{name} must have low < high, got [{low}, {high}]")
-    return [low, high]
-
-
-def as_task(name: str, value: Any) -> Task | None:
-    """``None`` or a mapping of parameter name to number; checked against a space by ``in_space``."""
-    if value is None:
-        return None
-    if not isinstance(value, Mapping):
-        raise ValueError(f"{name} must be null or a task (parameter name to value), got {value!r}")
-    return {str(key): as_float(f"{name}.{key}", v) for key, v in value.items()}
+        Raises ``pydantic.ValidationError`` (a ``ValueError``) naming each bad field."""
+        if raw is None:
+            return cls()
+        if isinstance(raw, cls):
+            return raw
+        if isinstance(raw, Mapping):
+            return cls.model_validate(dict(raw))
+        raise ValueError(f"parameters must be a mapping of name to value, got {type(raw).__name__}")
 
 
 def in_space(name: str, task: Task, space: TaskSpace) -> Task:

@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.params import as_task, in_space, parse_params, store
+from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
 
 
-@dataclass(frozen=True)
-class RandomParams:
+class RandomParams(TeacherParams):
     """Uniform sampling has no parameters."""
 
 
@@ -21,10 +19,11 @@ class RandomTeacher(Teacher):
     """Every task uniform over the box: the baseline a curriculum has to beat."""
 
     kind = "random"
+    Params = RandomParams
+    params: RandomParams
 
-    def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
-        super().__init__(space, seed)
-        self.params = parse_params(self.kind, RandomParams, params)
+    def __init__(self, space: TaskSpace, seed: int, params: RandomParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         unit = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, len(self.space))
@@ -37,23 +36,20 @@ class RandomTeacher(Teacher):
         return {}
 
 
-@dataclass(frozen=True)
-class FixedParams:
-    point: Task | None = None
-    """The one task to train on; None means the space's hardest point (the evaluation setting)."""
-
-    def __post_init__(self) -> None:
-        store(self, point=as_task("point", self.point))
+class FixedParams(TeacherParams):
+    point: TaskParam | None = None
+    """The one task to train on; null means the space's hardest point (the evaluation setting)."""
 
 
 class FixedTeacher(Teacher):
     """Always the same task: training without a curriculum."""
 
     kind = "fixed"
+    Params = FixedParams
+    params: FixedParams
 
-    def __init__(self, space: TaskSpace, seed: int, params: Mapping[str, Any] | None = None) -> None:
-        super().__init__(space, seed)
-        self.params = parse_params(self.kind, FixedParams, params)
+    def __init__(self, space: TaskSpace, seed: int, params: FixedParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
         if self.params.point is not None:
             self.point = in_space("point", self.params.point, space)
         else:

@@ -68,15 +68,44 @@ def test_put_creates_then_confirms_an_identical_curriculum_and_refuses_a_differe
 @pytest.mark.parametrize(
     ("change", "where", "says"),
     [
-        ({"teacher": "curious"}, ("body", "teacher"), "alp-gmm"),
-        ({"seed": -1}, ("body", "seed"), "greater than or equal to 0"),
-        ({"space": []}, ("body", "space"), "at least 1"),
-        ({"space": [{"name": "x", "low": 1.0, "high": 0.0}]}, ("body",), "low <= high"),
-        ({"space": [{"name": "x", "low": 0.0, "high": 1.0, "hardest": 2.0}]}, ("body",), "hardest=2.0 outside"),
-        ({"space": [{"name": "x", "low": -1.5e308, "high": 1.5e308}]}, ("body",), "overflows"),
-        ({"params": {"fit_rate": 5, "typo": 1}, "teacher": "alp-gmm"}, ("body", "params"), "typo"),
-        ({"params": {"fit_rate": 0}, "teacher": "alp-gmm"}, ("body", "params"), "fit_rate must be at least 2"),
-        ({"extra": True}, ("body", "extra"), "Extra inputs"),
+        ({"teacher": "curious"}, ("body",), "expected tags: 'alp-gmm', 'manual', 'random', 'fixed'"),
+        ({"seed": -1}, ("body", "random", "seed"), "greater than or equal to 0"),
+        ({"space": []}, ("body", "random", "space"), "at least 1"),
+        ({"space": [{"name": "x", "low": 1.0, "high": 0.0}]}, ("body", "random"), "low <= high"),
+        (
+            {"space": [{"name": "x", "low": 0.0, "high": 1.0, "hardest": 2.0}]},
+            ("body", "random"),
+            "hardest=2.0 outside",
+        ),
+        ({"space": [{"name": "x", "low": -1.5e308, "high": 1.5e308}]}, ("body", "random"), "overflows"),
+        ({"params": {"fit_rate": 5, "typo": 1}, "teacher": "alp-gmm"}, ("body", "alp-gmm", "params", "typo"), "Extra"),
+        (
+            {"params": {"fit_rate": 0}, "teacher": "alp-gmm"},
+            ("body", "alp-gmm", "params", "fit_rate"),
+            "greater than or equal to 2",
+        ),
+        (
+            {"params": {"nb_em_init": 10**6}, "teacher": "alp-gmm"},
+            ("body", "alp-gmm", "params", "nb_em_init"),
+            "less than or equal to 5",
+        ),
+        (
+            {"params": {"buffer_size": 10**12}, "teacher": "alp-gmm"},
+            ("body", "alp-gmm", "params", "buffer_size"),
+            "less than or equal to 10000",
+        ),
+        (
+            {"params": {"fit_rate": 10**9}, "teacher": "alp-gmm"},
+            ("body", "alp-gmm", "params", "fit_rate"),
+            "less than or equal to 2000",
+        ),
+        (
+            {"params": {"max_components": 10**6}, "teacher": "alp-gmm"},
+            ("body", "alp-gmm", "params", "max_components"),
+            "less than or equal to 16",
+        ),
+        ({"params": {"seed": 3}}, ("body", "random", "params", "seed"), "Extra inputs"),
+        ({"extra": True}, ("body", "random", "extra"), "Extra inputs"),
     ],
 )
 def test_put_explains_what_is_wrong_with_a_curriculum(http, kuka_space, change, where, says):
@@ -300,6 +329,23 @@ def test_openapi_documents_every_endpoint_and_error(service):
     assert {"401", "404", "413", "422"} <= set(paths["/api/v1/curricula/{name}/results"]["post"]["responses"])
     assert put["security"] == [{"HTTPBearer": []}]
     assert "security" not in paths["/api/v1/curricula/{name}/state"]["get"]
+
+
+def test_openapi_shows_each_teacher_kinds_parameters_with_bounds_defaults_and_docs(service):
+    schemas = httpx.get(f"{service.url}/openapi.json").json()["components"]["schemas"]
+    for kind in ("AlpGmm", "Manual", "Random", "Fixed"):
+        assert schemas[f"{kind}Curriculum"]["properties"]["params"]["$ref"] == f"#/components/schemas/{kind}Params"
+    fit_rate = schemas["AlpGmmParams"]["properties"]["fit_rate"]
+    assert (fit_rate["minimum"], fit_rate["maximum"], fit_rate["default"]) == (2, 2000, 250)
+    assert fit_rate["description"].startswith("Results between two mixture fits")
+    window = schemas["ManualParams"]["properties"]["window"]
+    assert (window["minimum"], window["maximum"], window["default"]) == (1, 10_000, 100)
+    every_field = [
+        (kind, name, field)
+        for kind in ("AlpGmmParams", "ManualParams", "FixedParams")
+        for name, field in schemas[kind]["properties"].items()
+    ]
+    assert all(field.get("description") for _, _, field in every_field), every_field
 
 
 def test_writes_need_the_token_and_reads_do_not(service, write_token, kuka_space):

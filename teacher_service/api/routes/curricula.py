@@ -11,7 +11,6 @@ from common.schemas import (
     API_PREFIX,
     CurriculumInfo,
     CurriculumList,
-    CurriculumSpec,
     CurriculumState,
     ErrorMessage,
     ResultAck,
@@ -21,6 +20,7 @@ from common.schemas import (
 )
 from teacher_service.api.deps import CurriculumDep, CurriculumName, RegistryDep, WriteAccess
 from teacher_service.curricula import CurriculumConflict, InvalidResults
+from teacher_service.curriculum_spec import CurriculumRequest
 
 router = APIRouter(prefix=f"{API_PREFIX}/curricula", tags=["curricula"])
 
@@ -56,16 +56,18 @@ async def list_curricula(registry: RegistryDep) -> CurriculumList:
     },
 )
 async def put_curriculum(
-    name: CurriculumName, spec: CurriculumSpec, registry: RegistryDep, response: Response
+    name: CurriculumName, spec: CurriculumRequest, registry: RegistryDep, response: Response
 ) -> CurriculumInfo:
-    """Create a curriculum: one teacher over one task space. Idempotent for an identical body."""
+    """Create a curriculum: one teacher over one task space. Idempotent for an identical body
+    (parameters left out count as their defaults). Each teacher kind's parameters, with their
+    bounds and defaults, are in the request schema below."""
     try:
         curriculum, created = await registry.create(name, spec)
     except CurriculumConflict as conflict:
         raise HTTPException(status.HTTP_409_CONFLICT, str(conflict)) from None
     except ValueError as error:
         raise RequestValidationError(
-            [{"loc": ["body", "params"], "msg": str(error), "type": "value_error", "input": spec.params}]
+            [{"loc": ["body", "params"], "msg": str(error), "type": "value_error", "input": spec.params.model_dump()}]
         ) from None
     if not created:
         response.status_code = status.HTTP_200_OK

@@ -112,7 +112,7 @@ def test_a_target_task_ratio_sends_that_share_of_tasks_to_the_hardest_task_from_
     ("params", "message"),
     [
         ({"target_task_ratio": 0.9}, "cannot add up to more than 1"),
-        ({"target_task_ratio": 1.5}, r"target_task_ratio must lie in \[0.0, 1.0\]"),
+        ({"target_task_ratio": 1.5}, r"target_task_ratio\n  Input should be less than or equal to 1"),
     ],
 )
 def test_bad_target_shares_are_refused(params: dict[str, Any], message: str) -> None:

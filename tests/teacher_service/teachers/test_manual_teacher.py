@@ -109,3 +109,27 @@ def test_rejects_a_space_without_the_books_parameters() -> None:
     space = TaskSpace([Parameter("difficulty", 0.0, 1.0, hardest=1.0, easiest=0.0)])
     with pytest.raises(ValueError, match="needs exactly the parameters"):
         make_teacher("manual", space, 0)
+
+
+def _kuka_space_with(name: str, **anchors: float) -> TaskSpace:
+    """The KUKA space with one parameter's bounds and anchors replaced."""
+    return TaskSpace(Parameter(p.name, **anchors) if p.name == name else p for p in KUKA_TASK_SPACE.parameters)
+
+
+@pytest.mark.timeout(5)
+@pytest.mark.parametrize(
+    ("anchors", "message"),
+    [
+        ({"low": 0.0, "high": 1e6, "easiest": 0.0, "hardest": 1e6}, "would have 20000001 lessons, more than 1000"),
+        ({"low": 1e15, "high": 1e15 + 1, "easiest": 1e15, "hardest": 1e15 + 1}, "lost to rounding"),
+    ],
+)
+def test_a_plan_too_long_or_that_never_arrives_is_refused_at_once(anchors: dict[str, float], message: str) -> None:
+    space = _kuka_space_with("rnd_obj_x", **anchors)
+    with pytest.raises(ValueError, match=message):
+        make_teacher("manual", space, 0)
+
+
+def test_the_longest_allowed_plan_is_built() -> None:
+    space = _kuka_space_with("rnd_obj_x", low=0.0, high=49.95, easiest=0.0, hardest=49.95)
+    assert make_teacher("manual", space, 0).state()["lessons"] == 1000
