@@ -87,7 +87,8 @@ class CurriculumCounters(BaseModel):
     tasks_issued: int
     results_received: int
     results_per_second: float = Field(description="Results accepted per second over the recent window.")
-    tasks_outstanding: int = Field(description="Issued tasks with no result yet.")
+    tasks_outstanding: int = Field(description="Issued tasks awaiting a result (not yet expired).")
+    tasks_expired: int = Field(default=0, description="Tasks that expired with no result since the service started.")
     fits_completed: int
     fits_pending: int
     last_fit_at: float | None = Field(description="Unix time the last fit was installed.")
@@ -131,6 +132,10 @@ class ResultBatch(_Request):
 class ResultAck(BaseModel):
     accepted: int = Field(description="Results applied by this request.")
     duplicates: int = Field(description="Results for tasks that already had one; ignored.")
+    expired: int = Field(
+        default=0,
+        description="Results for tasks that had expired (KC_TASK_TTL_S, KC_TASK_WINDOW) before they came; ignored.",
+    )
 
 
 class FitEvent(BaseModel):

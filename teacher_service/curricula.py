@@ -99,6 +99,14 @@ class Curriculum:
         """One past the highest task index on disk: task ids below it have been handed out."""
         self.results_received = 0
         self.outstanding: dict[int, Task] = {}
+        """Tasks awaiting a result, by index."""
+        self.tasks_expired = 0
+        self._awaiting: deque[tuple[int, float]] = deque()
+        """(index, issued_at) of the tasks that may still be outstanding, oldest first."""
+        self._writing: set[int] = set()
+        """Tasks whose result is being stored: a second result for one is a duplicate."""
+        self._task_ttl_s = settings.task_ttl_s
+        self._task_window = settings.task_window
         self.recent_results: deque[RecentResult] = deque(maxlen=settings.recent_results)
         self.fit_events: deque[FitEvent] = deque(maxlen=FIT_HISTORY)
         self.fits_completed = 0
@@ -107,6 +115,8 @@ class Curriculum:
         self._store = store
         self._fits = fits
         self._tasks_counter = metrics.tasks_issued.labels(name)
+        self._expired_tasks_counter = metrics.tasks_expired.labels(name)
+        self._expired_results_counter = metrics.results.labels(name, "expired")
         self._accepted_counter = metrics.results.labels(name, "accepted")
         self._duplicate_counter = metrics.results.labels(name, "duplicate")
         self._fits_counter = metrics.fits.labels(name)
@@ -138,9 +148,11 @@ class Curriculum:
 
         def stored() -> None:
             self.outstanding.update(zip(range(first, first + count), tasks, strict=True))
+            self._awaiting.extend((index, issued_at) for index in range(first, first + count))
             self.tasks_issued += count
             self.issued_through = max(self.issued_through, first + count)
             self._tasks_counter.inc(count)
+            self._expire(issued_at)
 
         await self._store.write([(INSERT_TASK, rows)], on_commit=stored)
         return [IssuedTask(task_id=self.task_id(first + i), params=task) for i, task in enumerate(tasks)]
@@ -148,12 +160,15 @@ class Curriculum:
     async def report(self, items: list[ResultItem]) -> ResultAck:
         """Store new results, then learn from them; all or nothing.
 
-        A result for a task that already has one (or appears twice here) is a duplicate and is
-        ignored, which makes retries safe. Results are claimed before the write so a concurrent
-        request cannot apply the same task twice, and released again if the write fails.
+        A result for a task that already has one (or appears twice here) is a duplicate, and one for
+        a task that expired is late; both are ignored and counted, which makes retries safe. Results
+        are claimed before the write so a concurrent request cannot apply the same task twice.
         """
+        received_at = time.time()
+        self._expire(received_at)
         errors: list[dict[str, Any]] = []
         claimed: dict[int, ResultItem] = {}
+        settled: list[int] = []
         duplicates = 0
         for position, item in enumerate(items):
             index = self.task_index(item.task_id)
@@ -166,23 +181,33 @@ class Curriculum:
                         "input": item.task_id,
                     }
                 )
-            elif index in claimed or index not in self.outstanding:
+            elif index in claimed or index in self._writing:
                 duplicates += 1
-            else:
+            elif index in self.outstanding:
                 claimed[index] = item
+            else:
+                settled.append(index)
         if errors:
             raise InvalidResults(errors)
+        answered = self._store.answered_tasks(self.id, settled) if settled else set()
+        late_duplicates = sum(index in answered for index in settled)
+        duplicates += late_duplicates
+        expired = len(settled) - late_duplicates
         self._duplicate_counter.inc(duplicates)
+        self._expired_results_counter.inc(expired)
+        ack = ResultAck(accepted=len(claimed), duplicates=duplicates, expired=expired)
         if not claimed:
-            return ResultAck(accepted=0, duplicates=duplicates)
-        tasks = {index: self.outstanding.pop(index) for index in claimed}
-        received_at = time.time()
+            return ack
+        tasks = {index: self.outstanding[index] for index in claimed}
+        self._writing.update(claimed)
         rows = [
             (self.id, index, item.reward, item.success, item.length, received_at) for index, item in claimed.items()
         ]
 
         def stored() -> None:
+            self._writing.difference_update(claimed)
             for index, item in claimed.items():
+                self.outstanding.pop(index, None)
                 job = self._learn(index, tasks[index], item.reward, item.success, item.length, received_at)
                 if job is not None:
                     self._submit_fit(job)
@@ -190,10 +215,22 @@ class Curriculum:
             self._accepted_counter.inc(len(claimed))
 
         def not_stored() -> None:
-            self.outstanding.update(tasks)
+            self._writing.difference_update(claimed)
 
         await self._store.write([(INSERT_RESULT, rows)], on_commit=stored, on_abort=not_stored)
-        return ResultAck(accepted=len(claimed), duplicates=duplicates)
+        return ack
+
+    def _expire(self, now: float) -> None:
+        """Forget tasks handed out more than ``task_ttl_s`` ago or ``task_window`` tasks ago."""
+        deadline, oldest_kept = now - self._task_ttl_s, self.issued_through - self._task_window
+        expired = 0
+        while self._awaiting and (self._awaiting[0][0] < oldest_kept or self._awaiting[0][1] < deadline):
+            index, _ = self._awaiting.popleft()
+            if self.outstanding.pop(index, None) is not None and index not in self._writing:
+                expired += 1
+        if expired:
+            self.tasks_expired += expired
+            self._expired_tasks_counter.inc(expired)
 
     def _learn(
         self, index: int, task: Task, reward: float, success: bool | None, length: int | None, received_at: float
@@ -281,6 +318,7 @@ class Curriculum:
                 results_received=self.results_received,
                 results_per_second=self.results_per_second(now),
                 tasks_outstanding=len(self.outstanding),
+                tasks_expired=self.tasks_expired,
                 fits_completed=self.fits_completed,
                 fits_pending=self.fits_pending,
                 last_fit_at=self.last_fit_at,
@@ -336,7 +374,10 @@ class Curriculum:
             unrecorded.append(self._fit_row(outcome))
         if unrecorded:
             store.write_now([(INSERT_FIT, unrecorded)])
-        self.outstanding = dict(store.outstanding_tasks(self.id))
+        for index, task, issued_at in store.outstanding_tasks(self.id, self.issued_through - self._task_window):
+            self.outstanding[index] = task
+            self._awaiting.append((index, issued_at))
+        self._expire(time.time())
 
 
 def _rerun(job: FitJob, recorded: StoredFit) -> FitOutcome:

@@ -28,9 +28,12 @@ class ServiceMetrics:
             registry=self.registry,
         )
         self.tasks_issued = Counter("kc_tasks_issued", "Tasks handed out.", ["curriculum"], registry=self.registry)
+        self.tasks_expired = Counter(
+            "kc_tasks_expired", "Tasks that expired with no result.", ["curriculum"], registry=self.registry
+        )
         self.results = Counter(
             "kc_results",
-            "Results received, by outcome (accepted or duplicate).",
+            "Results received, by outcome (accepted, duplicate, or expired: its task had expired).",
             ["curriculum", "outcome"],
             registry=self.registry,
         )

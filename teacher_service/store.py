@@ -179,16 +179,26 @@ class Store:
                 index, json.loads(params), reward, None if success is None else bool(success), length, received_at
             )
 
-    def outstanding_tasks(self, curriculum_id: int) -> Iterator[tuple[int, Task]]:
-        """Issued tasks that have no result yet."""
+    def outstanding_tasks(self, curriculum_id: int, first_index: int) -> Iterator[tuple[int, Task, float]]:
+        """Issued tasks from ``first_index`` on that have no result yet, with when they were issued."""
         rows = self._db.execute(
-            "SELECT t.task_index, t.params FROM tasks t WHERE t.curriculum_id = ? AND NOT EXISTS"
+            "SELECT t.task_index, t.params, t.issued_at FROM tasks t"
+            " WHERE t.curriculum_id = ? AND t.task_index >= ? AND NOT EXISTS"
             " (SELECT 1 FROM results r WHERE r.curriculum_id = t.curriculum_id AND r.task_index = t.task_index)"
             " ORDER BY t.task_index",
-            (curriculum_id,),
+            (curriculum_id, max(first_index, 0)),
         )
-        for index, params in rows:
-            yield index, json.loads(params)
+        for index, params, issued_at in rows:
+            yield index, json.loads(params), issued_at
+
+    def answered_tasks(self, curriculum_id: int, indices: list[int]) -> set[int]:
+        """Which of these tasks have a stored result (at most ``MAX_RESULTS_PER_REQUEST`` of them)."""
+        marks = ", ".join("?" * len(indices))  # placeholders only: the values stay bound parameters
+        rows = self._db.execute(
+            f"SELECT task_index FROM results WHERE curriculum_id = ? AND task_index IN ({marks})",
+            (curriculum_id, *indices),
+        )
+        return {index for (index,) in rows}
 
     def fits(self, curriculum_id: int) -> list[StoredFit]:
         rows = self._db.execute(

@@ -25,6 +25,12 @@ class Settings(BaseSettings):
     """FULL syncs every commit to disk (survives power loss); NORMAL survives process crashes only."""
     recent_results: int = Field(default=2000, ge=0)
     """Results per curriculum kept in memory for ``/state``."""
+    task_ttl_s: float = Field(default=3600.0, gt=0, le=30 * 86400)
+    """A task handed out this many seconds ago with no result expires: a late result for it is
+    counted as ``expired`` and ignored (the teacher already moved on)."""
+    task_window: int = Field(default=10_000, ge=1, le=1_000_000)
+    """A task also expires once this many later tasks of its curriculum have been handed out, which
+    bounds each curriculum's memory of tasks awaiting results."""
     rate_window_s: float = Field(default=10.0, gt=0)
     """Window over which ``results_per_second`` is measured."""
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"

@@ -21,7 +21,9 @@ def test_the_script_registers_takes_tasks_posts_results_and_reads_the_state(teac
     assert lines[0] == f"watch the curriculum at {teacher.url}/curricula/shell"
     tasks = [json.loads(line) for line in lines if line.startswith('{"task_id"')]
     assert len(tasks) == 3
-    assert {"accepted": 3, "duplicates": 0} in [json.loads(line) for line in lines if line.startswith("{")]
+    assert {"accepted": 3, "duplicates": 0, "expired": 0} in [
+        json.loads(line) for line in lines if line.startswith("{")
+    ]
 
     state = curriculum_state(teacher, "shell")
     assert state["curriculum"]["config"]["teacher"] == "alp-gmm"

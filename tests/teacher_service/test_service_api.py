@@ -166,12 +166,12 @@ def test_results_are_accepted_once_per_task(http, kuka_space):
     results = [
         {"task_id": t["task_id"], "reward": float(i), "success": i == 2, "length": 10 + i} for i, t in enumerate(tasks)
     ]
-    assert _report(http, "results-a", results).json() == {"accepted": 3, "duplicates": 0}
-    assert _report(http, "results-a", results).json() == {"accepted": 0, "duplicates": 3}
+    assert _report(http, "results-a", results).json() == {"accepted": 3, "duplicates": 0, "expired": 0}
+    assert _report(http, "results-a", results).json() == {"accepted": 0, "duplicates": 3, "expired": 0}
 
     more = _draw(http, "results-a", 1)[0]
     twice = [{"task_id": more["task_id"], "reward": 1.0}] * 2
-    assert _report(http, "results-a", twice).json() == {"accepted": 1, "duplicates": 1}
+    assert _report(http, "results-a", twice).json() == {"accepted": 1, "duplicates": 1, "expired": 0}
 
     counters = _counters(http, "results-a")
     assert counters["results_received"] == 4 and counters["tasks_outstanding"] == 0

@@ -122,6 +122,7 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes):
         assert api.post(f"/curricula/{NAME}/results", json={"results": late + again}).json() == {
             "accepted": 3,
             "duplicates": 2,
+            "expired": 0,
         }
         api.close()
     finally:

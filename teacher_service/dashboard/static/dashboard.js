@@ -226,7 +226,12 @@ function renderSummary(state) {
   setText("stat-tasks", formatNumber(counters.tasks_issued));
   setText("stat-results", formatNumber(counters.results_received));
   setText("stat-rate", counters.results_per_second.toFixed(1));
-  setText("stat-outstanding", formatNumber(counters.tasks_outstanding));
+  setText(
+    "stat-outstanding",
+    counters.tasks_expired
+      ? `${formatNumber(counters.tasks_outstanding)} (${formatNumber(counters.tasks_expired)} expired)`
+      : formatNumber(counters.tasks_outstanding),
+  );
   setText(
     "stat-fits",
     counters.fits_pending ? `${formatNumber(counters.fits_completed)} (+${counters.fits_pending})` : formatNumber(counters.fits_completed),

@@ -1,0 +1,89 @@
+"""Tasks handed out and never reported expire, so a curriculum's memory of them stays bounded; a late
+result for an expired task is counted and ignored (a real uvicorn and SQLite file, and a SIGKILL)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from teacher_service.process import ServiceProcess
+
+WINDOW = 5
+TTL_S = 1.5
+
+
+@pytest.fixture()
+def db(tmp_path: Path) -> Path:
+    return tmp_path / "teacher.db"
+
+
+def _service(db: Path, ttl_s: float = TTL_S) -> ServiceProcess:
+    return ServiceProcess(db, env={"KC_TASK_WINDOW": str(WINDOW), "KC_TASK_TTL_S": str(ttl_s)})
+
+
+@pytest.fixture()
+def api(db: Path) -> Iterator[httpx.Client]:
+    with _service(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as client:
+        client.service = service  # type: ignore[attr-defined]
+        yield client
+
+
+def _create(api: httpx.Client, kuka_space: list[dict[str, Any]], name: str) -> None:
+    assert api.put(f"/curricula/{name}", json={"teacher": "random", "space": kuka_space}).status_code == 201
+
+
+def _draw(api: httpx.Client, name: str, count: int) -> list[str]:
+    return [task["task_id"] for task in api.post(f"/curricula/{name}/tasks", json={"count": count}).json()["tasks"]]
+
+
+def _report(api: httpx.Client, name: str, task_ids: list[str]) -> dict[str, int]:
+    results = [{"task_id": task_id, "reward": 1.0} for task_id in task_ids]
+    response = api.post(f"/curricula/{name}/results", json={"results": results})
+    assert response.status_code == 200, response.text
+    ack: dict[str, int] = response.json()
+    return ack
+
+
+def _counters(api: httpx.Client, name: str) -> dict[str, Any]:
+    counters: dict[str, Any] = api.get(f"/curricula/{name}").json()["counters"]
+    return counters
+
+
+def test_a_task_expires_once_the_window_of_later_tasks_has_passed(api, kuka_space):
+    _create(api, kuka_space, "window")
+    ids = _draw(api, "window", WINDOW + 3)
+    counters = _counters(api, "window")
+    assert (counters["tasks_outstanding"], counters["tasks_expired"]) == (WINDOW, 3)
+
+    assert _report(api, "window", ids[:2] + ids[-1:]) == {"accepted": 1, "duplicates": 0, "expired": 2}
+    assert _report(api, "window", ids[-1:]) == {"accepted": 0, "duplicates": 1, "expired": 0}
+    counters = _counters(api, "window")
+    assert (counters["results_received"], counters["tasks_outstanding"]) == (1, WINDOW - 1)
+    metrics = httpx.get(f"{api.service.url}/metrics").text
+    assert 'kc_results_total{curriculum="window",outcome="expired"} 2.0' in metrics
+    assert 'kc_tasks_expired_total{curriculum="window"} 3.0' in metrics
+
+
+def test_a_task_expires_after_its_time_to_live(api, kuka_space):
+    _create(api, kuka_space, "ttl")
+    old = _draw(api, "ttl", 2)
+    time.sleep(TTL_S + 0.2)
+    new = _draw(api, "ttl", 1)
+    assert _counters(api, "ttl")["tasks_outstanding"] == 1
+    assert _report(api, "ttl", old + new) == {"accepted": 1, "duplicates": 0, "expired": 2}
+
+
+def test_a_restart_keeps_only_the_tasks_still_awaited(db, kuka_space):
+    with _service(db, ttl_s=600) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+        _create(api, kuka_space, "restart")
+        ids = _draw(api, "restart", WINDOW + 2)
+        _report(api, "restart", ids[-1:])
+        service.kill()
+    with _service(db, ttl_s=600) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+        assert _counters(api, "restart")["tasks_outstanding"] == WINDOW - 1
+        assert _report(api, "restart", ids) == {"accepted": WINDOW - 1, "duplicates": 1, "expired": 2}
