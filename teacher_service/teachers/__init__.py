@@ -12,7 +12,7 @@ from typing import Any
 
 from common.task_space import TaskSpace
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
-from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
@@ -32,4 +32,4 @@ def make_teacher(
     return factory(space, seed, params)
 
 
-__all__ = ["TEACHER_KINDS", "EpisodeResult", "FitJob", "Teacher", "TeacherParams", "make_teacher"]
+__all__ = ["TEACHER_KINDS", "BuildJob", "EpisodeResult", "FitJob", "Teacher", "TeacherParams", "make_teacher"]

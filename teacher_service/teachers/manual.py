@@ -14,6 +14,7 @@ from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from common.task_space import Task, TaskSpace
@@ -156,3 +157,22 @@ class ManualTeacher(Teacher):
             "stale_results": self.stale_results,
             "advanced_at_results": list(self.advanced_at),
         }
+
+    def _export(self) -> dict[str, Any]:
+        return {
+            "lesson": self.lesson,
+            "lesson_rewards": list(self.lesson_rewards),
+            "lesson_episodes": self.lesson_episodes,
+            "stale_results": self.stale_results,
+            "advanced_at": list(self.advanced_at),
+        }
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        lesson = int(state["lesson"])
+        if not 0 <= lesson < len(self.lessons):
+            raise ValueError(f"lesson {lesson} is not in this plan of {len(self.lessons)} lessons")
+        self.lesson = lesson
+        self.lesson_rewards.extend(float(reward) for reward in state["lesson_rewards"])
+        self.lesson_episodes = int(state["lesson_episodes"])
+        self.stale_results = int(state["stale_results"])
+        self.advanced_at = [int(count) for count in state["advanced_at"]]
