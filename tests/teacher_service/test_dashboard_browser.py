@@ -88,8 +88,11 @@ def create_curriculum(service: ServiceProcess, name: str, teacher: str, params: 
     assert response.status_code == 201, response.text
 
 
-def train(service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RATE) -> list[dict[str, Any]]:
-    """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student."""
+def train(
+    service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RATE, settle: bool = True
+) -> list[dict[str, Any]]:
+    """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student. With
+    ``settle``, each batch waits for the fits it caused."""
     rng = np.random.default_rng(7)
     played = []
     with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula/{name}", headers=WRITES, timeout=10) as client:
@@ -102,7 +105,8 @@ def train(service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RA
                 results.append({"task_id": task["task_id"], "reward": reward, "success": reward > 3.0, "length": 80})
                 played.append({"params": task["params"], "reward": reward})
             assert client.post("/results", json={"results": results}).raise_for_status().json()["accepted"] == batch
-            wait_for_fits(service, name)
+            if settle:
+                wait_for_fits(service, name)
     return played
 
 
@@ -257,3 +261,35 @@ def test_dashboard_survives_a_service_restart(browser: Browser, service: Service
     assert page.evaluate("() => window.sameDocument") is True, "the page was not reloaded"
     assert problems.exceptions == [] and problems.foreign == []
     page.close()
+
+
+def test_fits_that_were_abandoned_or_superseded_are_listed_with_the_reason(browser: Browser, tmp_path: Path) -> None:
+    """Fit 0 runs past a 1 s limit; fit 1 falls due and waits for the fresh fit process, and fit 2
+    replaces it there."""
+    slow_fits = {"fit_rate": 1000, "min_components": 1, "max_components": 16, "nb_em_init": 3}
+    env = {"KC_TEACHER_TOKEN": WRITE_TOKEN, "KC_FIT_TIMEOUT_S": "1"}
+    with ServiceProcess(tmp_path / "teacher.db", env=env) as service:
+        create_curriculum(service, "kuka-slow-fits", "alp-gmm", slow_fits)
+        train(service, "kuka-slow-fits", 1000, batch=1000)
+        train(service, "kuka-slow-fits", 2000, batch=1000, settle=False)
+        fits = wait_for_fits(service, "kuka-slow-fits")["fits"]
+        assert [(fit["index"], fit["error"]) for fit in fits] == [
+            (0, "abandoned after 1 s"),
+            (1, "superseded by fit 2"),
+            (2, "abandoned after 1 s"),
+        ]
+
+        page, problems = open_page(browser, f"{service.url}/curricula/kuka-slow-fits", service)
+        rows = page.locator("#fit-rows tr")
+        rows.nth(2).wait_for()
+        cells = [row.locator("td").all_inner_texts() for row in rows.all()]
+        assert [row[0] for row in cells] == ["2", "1", "0"], "newest first"
+        assert cells[0][3].startswith("abandoned after 1 s: it ran past the time limit (KC_FIT_TIMEOUT_S)")
+        assert "the teacher kept its model" in cells[0][3]
+        assert cells[1][3].startswith("superseded by fit 2: the next fit fell due before this one could start")
+        assert rows.nth(0).locator("td").nth(3).get_attribute("class") == "failed"
+        assert rows.nth(1).locator("td").nth(3).get_attribute("class") == "skipped"
+        assert page.inner_text("#fits-note").endswith("3 not installed")
+        assert page.locator("#fits-stopped").is_hidden()
+        assert problems == PageProblems()
+        page.close()

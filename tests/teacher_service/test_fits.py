@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import os
+import signal
 import time
 from collections import defaultdict
 from collections.abc import AsyncIterator, Callable
@@ -166,7 +168,8 @@ def test_a_fit_past_the_time_limit_is_abandoned_and_the_teacher_keeps_its_model(
             await outcomes.wait("a", 1)
             assert teacher.state()["last_fit_index"] == 0
             (hanging,) = _results(teacher, 20)
-            runner.submit("a", job(hanging.index, fit_jobs.note_pid_then_sleep, str(pid_file), 60.0), install_and_record)
+            hang = job(hanging.index, fit_jobs.note_pid_then_sleep, str(pid_file), 60.0)
+            runner.submit("a", hang, install_and_record)
             (*_, abandoned) = await outcomes.wait("a", 2)
             assert abandoned.error == "abandoned after 1 s"
             assert 1.0 <= abandoned.finished_at - abandoned.started_at < 5.0
@@ -258,3 +261,38 @@ def test_an_ordinary_curriculum_keeps_fitting_beside_one_with_the_most_expensive
         fits = http.get("/curricula/ordinary/state").json()["fits"]
         assert [(f["index"], f["error"]) for f in fits] == [(0, None), (1, None), (2, None)]
         assert http.get(f"{service.url}/healthz").json()["fits_stopped"] is None
+
+
+def test_the_service_says_when_its_fit_processes_keep_dying(
+    tmp_path: Path, kuka_space: list[dict[str, Any]], fit_processes: Callable[[int], list[int]]
+) -> None:
+    """Each fit process is killed as soon as it appears, so the fit never finishes."""
+    params = {"fit_rate": 2000, "min_components": 1, "max_components": 16, "nb_em_init": 5}
+    with (
+        ServiceProcess(tmp_path / "teacher.db") as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0) as http,
+    ):
+        body = {"teacher": "alp-gmm", "space": kuka_space, "params": params, "seed": 1}
+        assert http.put("/curricula/doomed", json=body).status_code == 201
+        _feed(http, "doomed", 2000)
+        killed: set[int] = set()
+        deadline = time.monotonic() + 60
+        while len(killed) < 3:
+            assert time.monotonic() < deadline, f"only {len(killed)} fit processes appeared"
+            for pid in set(fit_processes(service.pid)) - killed:
+                os.kill(pid, signal.SIGKILL)
+                killed.add(pid)
+            time.sleep(0.02)
+        while (reason := http.get(f"{service.url}/healthz").json()["fits_stopped"]) is None:
+            assert time.monotonic() < deadline, "the service did not report that fits stopped"
+            time.sleep(0.05)
+        assert "died 3 times in a row" in reason and "killed by SIGKILL" in reason
+        assert "resume when the service restarts" in reason
+        counters = _counters(http, "doomed")
+        assert (counters["fits_stopped"], counters["fits_pending"]) == (reason, 0)
+        (fit,) = http.get("/curricula/doomed/state").json()["fits"]
+        assert (fit["index"], fit["error"]) == (0, f"fits stopped: {reason}")
+        metrics = httpx.get(f"{service.url}/metrics").text
+        assert "kc_fits_stopped 1.0" in metrics and "kc_fit_process_deaths_total 3.0" in metrics
+        _feed(http, "doomed", 10)  # tasks are still served
+        assert fit_processes(service.pid) == [], "no fit process may be started after the stop"
