@@ -2,7 +2,9 @@
 
 A fit is seconds of scikit-learn EM, mostly Python that holds the GIL, so in a thread it would
 stall the event loop that answers requests. Fits therefore run in a small pool of separate
-processes, at a lower CPU priority than the service, started when the first fit needs one. Every
+processes at a lower CPU priority than the service. A process starts when a fit finds no idle one
+(starting takes a second or more, longer on a busy machine) and then stays, so a service whose
+curricula never fit starts none; one that dies or is killed is replaced at once. Every
 curriculum has a lane in which
 
 - at most one fit runs at a time and at most one waits: a fit that falls due while the previous
@@ -321,6 +323,7 @@ class FitRunner:
         worker.fit = None
         self._metrics.fit_timeouts.labels(fit.curriculum).inc()
         self._vacate(fit)
+        self._spawn()
         self._dispatch()
         self._fail(fit, f"abandoned after {self._timeout_s:g} s", started_at=worker.started_at)
 
@@ -357,6 +360,8 @@ class FitRunner:
                 f"fit processes died {self._deaths_in_a_row} times in a row without finishing a fit "
                 f"(the last: {how}); fits resume when the service restarts"
             )
+            return
+        self._spawn()
         self._dispatch()
 
     def _stop(self, reason: str) -> None:

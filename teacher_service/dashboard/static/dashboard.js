@@ -568,7 +568,8 @@ function renderFits(state) {
   showFitsStopped(state.curriculum.counters.fits_stopped);
   const fits = state.fits.slice(-FIT_ROWS).reverse();
   const notInstalled = state.fits.filter((fit) => fit.error !== null).length;
-  setText("fits-note", state.fits.length ? `newest ${fits.length} of the last ${state.fits.length} · ${notInstalled} not installed` : "");
+  const listed = fits.length < state.fits.length ? `, the newest ${fits.length} listed` : "";
+  setText("fits-note", state.fits.length ? `last ${state.fits.length}${listed} · ${notInstalled} not installed` : "");
   document.getElementById("fit-rows").replaceChildren(
     ...fits.map((fit) => {
       const [outcome, className] = fitOutcome(fit);
@@ -576,7 +577,7 @@ function renderFits(state) {
       for (const [text, cellClass] of [
         [String(fit.index), "number"],
         [clock(fit.finished_at), ""],
-        [`${fit.duration_s.toFixed(2)} s`, "number"],
+        [className === "skipped" ? "–" : `${fit.duration_s.toFixed(2)} s`, "number"],
         [outcome, className],
       ]) {
         row.append(Object.assign(document.createElement("td"), { textContent: text, className: cellClass }));
