@@ -148,7 +148,7 @@ class _Worker:
             channel.close()
 
 
-def describe_exit(exitcode: int | None) -> str:
+def _describe_exit(exitcode: int | None) -> str:
     """A process's end in words: its exit code, or the signal that killed it."""
     if exitcode is not None and exitcode < 0:
         try:
@@ -338,7 +338,7 @@ class FitRunner:
             return
         self._workers.remove(worker)
         worker.release()
-        how = describe_exit(worker.process.exitcode)
+        how = _describe_exit(worker.process.exitcode)
         self._deaths_in_a_row += 1
         self._metrics.fit_process_deaths.inc()
         fit, worker.fit = worker.fit, None
