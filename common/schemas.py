@@ -92,6 +92,10 @@ class CurriculumCounters(BaseModel):
     fits_completed: int
     fits_pending: int
     last_fit_at: float | None = Field(description="Unix time the last fit was installed.")
+    fits_stopped: str | None = Field(
+        default=None,
+        description="Why this service runs no fits any more (its fit processes kept dying); null while fits run.",
+    )
 
 
 class CurriculumInfo(BaseModel):
@@ -166,6 +170,10 @@ class CurriculumState(BaseModel):
 class Health(BaseModel):
     status: Literal["ok"] = "ok"
     curricula: int
+    fits_stopped: str | None = Field(
+        default=None,
+        description="Why no teacher model fits run any more (tasks are still served from the last models).",
+    )
 
 
 class ErrorMessage(BaseModel):

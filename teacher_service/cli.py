@@ -14,6 +14,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, help="port (default 8000, env KC_PORT)")
     parser.add_argument("--db", type=Path, help="SQLite database (default runs/teacher.db, env KC_DB)")
     parser.add_argument(
+        "--fit-processes",
+        type=int,
+        help="processes running teacher model fits, 1 to 8; each curriculum fits one at a time (default 2, "
+        "env KC_FIT_PROCESSES)",
+    )
+    parser.add_argument(
+        "--fit-timeout",
+        type=float,
+        metavar="SECONDS",
+        help="abandon a fit running longer, 1 to 3600; the teacher keeps its last model (default 60, "
+        "env KC_FIT_TIMEOUT_S)",
+    )
+    parser.add_argument(
         "--log-level",
         choices=["critical", "error", "warning", "info", "debug"],
         help="log level (default info, env KC_LOG_LEVEL)",
@@ -22,7 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def settings_from(args: argparse.Namespace) -> Settings:
     """Flags override ``KC_`` environment variables, which override the defaults."""
-    flags = {"host": args.host, "port": args.port, "db": args.db, "log_level": args.log_level}
+    flags = {
+        "host": args.host,
+        "port": args.port,
+        "db": args.db,
+        "fit_processes": args.fit_processes,
+        "fit_timeout_s": args.fit_timeout,
+        "log_level": args.log_level,
+    }
     return Settings(**{name: value for name, value in flags.items() if value is not None})
 
 

@@ -252,7 +252,7 @@ class Curriculum:
     def _submit_fit(self, job: FitJob) -> None:
         self.fits_pending += 1
         self._fits_pending_gauge.inc()
-        self._fits.submit(job, self._install_live)
+        self._fits.submit(self.name, job, self._install_live)
 
     def _install_live(self, outcome: FitOutcome) -> None:
         self.fits_pending -= 1
@@ -322,6 +322,7 @@ class Curriculum:
                 fits_completed=self.fits_completed,
                 fits_pending=self.fits_pending,
                 last_fit_at=self.last_fit_at,
+                fits_stopped=self._fits.stopped,
             ),
         )
 
@@ -415,7 +416,7 @@ class CurriculumRegistry:
         self._store = store
         self._metrics = metrics
         self._settings = settings
-        self._fits = FitRunner()
+        self._fits = FitRunner(settings.fit_processes, settings.fit_timeout_s, metrics)
         self._curricula: dict[str, Curriculum] = {}
 
     def restore(self) -> None:
@@ -439,6 +440,11 @@ class CurriculumRegistry:
     def close(self) -> None:
         self._fits.close()
         self._store.close()
+
+    @property
+    def fits_stopped(self) -> str | None:
+        """Why no fits run any more, if the fit processes kept dying."""
+        return self._fits.stopped
 
     def __len__(self) -> int:
         return len(self._curricula)

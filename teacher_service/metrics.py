@@ -39,7 +39,30 @@ class ServiceMetrics:
         )
         self.fits = Counter("kc_fits", "Teacher model fits installed.", ["curriculum"], registry=self.registry)
         self.fit_errors = Counter(
-            "kc_fit_errors", "Teacher model fits that raised.", ["curriculum"], registry=self.registry
+            "kc_fit_errors",
+            "Teacher model fits not installed: they raised, ran too long, were superseded or could not run.",
+            ["curriculum"],
+            registry=self.registry,
+        )
+        self.fit_timeouts = Counter(
+            "kc_fit_timeouts",
+            "Teacher model fits abandoned at the time limit (KC_FIT_TIMEOUT_S), their process killed.",
+            ["curriculum"],
+            registry=self.registry,
+        )
+        self.fits_superseded = Counter(
+            "kc_fits_superseded",
+            "Teacher model fits replaced, before they started, by the curriculum's next fit.",
+            ["curriculum"],
+            registry=self.registry,
+        )
+        self.fit_process_deaths = Counter(
+            "kc_fit_process_deaths", "Fit processes that died without being told to.", registry=self.registry
+        )
+        self.fits_stopped = Gauge(
+            "kc_fits_stopped",
+            "1 once fit processes kept dying and no fits run until the service restarts, else 0.",
+            registry=self.registry,
         )
         self.fit_seconds = Histogram(
             "kc_fit_duration_seconds",

@@ -33,4 +33,9 @@ class Settings(BaseSettings):
     bounds each curriculum's memory of tasks awaiting results."""
     rate_window_s: float = Field(default=10.0, gt=0)
     """Window over which ``results_per_second`` is measured."""
+    fit_processes: int = Field(default=2, ge=1, le=8)
+    """Processes running teacher model fits; a curriculum runs one fit at a time, so with a process
+    per busy curriculum no curriculum's long fit delays another's."""
+    fit_timeout_s: float = Field(default=60.0, ge=1.0, le=3600.0)
+    """A fit running longer is abandoned and its process killed; the teacher keeps its last model."""
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"

@@ -88,8 +88,11 @@ def create_curriculum(service: ServiceProcess, name: str, teacher: str, params: 
     assert response.status_code == 201, response.text
 
 
-def train(service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RATE) -> list[dict[str, Any]]:
-    """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student."""
+def train(
+    service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RATE, settle: bool = True
+) -> list[dict[str, Any]]:
+    """Play ``episodes`` made-up episodes: easier tasks earn more, as for a real student. With
+    ``settle``, each batch waits for the fits it caused."""
     rng = np.random.default_rng(7)
     played = []
     with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula/{name}", headers=WRITES, timeout=10) as client:
@@ -102,7 +105,8 @@ def train(service: ServiceProcess, name: str, episodes: int, batch: int = FIT_RA
                 results.append({"task_id": task["task_id"], "reward": reward, "success": reward > 3.0, "length": 80})
                 played.append({"params": task["params"], "reward": reward})
             assert client.post("/results", json={"results": results}).raise_for_status().json()["accepted"] == batch
-            wait_for_fits(service, name)
+            if settle:
+                wait_for_fits(service, name)
     return played
 
 
@@ -257,3 +261,36 @@ def test_dashboard_survives_a_service_restart(browser: Browser, service: Service
     assert page.evaluate("() => window.sameDocument") is True, "the page was not reloaded"
     assert problems.exceptions == [] and problems.foreign == []
     page.close()
+
+
+def test_fits_that_were_abandoned_or_superseded_are_listed_with_the_reason(browser: Browser, tmp_path: Path) -> None:
+    """Fits that take seconds against a 1 s limit, falling due faster than that: at most one runs
+    and one waits, so some are superseded, and the last one is abandoned."""
+    slow_fits = {"fit_rate": 1000, "min_components": 1, "max_components": 16, "nb_em_init": 5}
+    env = {"KC_TEACHER_TOKEN": WRITE_TOKEN, "KC_FIT_TIMEOUT_S": "1"}
+    with ServiceProcess(tmp_path / "teacher.db", env=env) as service:
+        create_curriculum(service, "kuka-slow-fits", "alp-gmm", slow_fits)
+        train(service, "kuka-slow-fits", 3000, batch=1000, settle=False)
+        fits = wait_for_fits(service, "kuka-slow-fits")["fits"]
+        assert [fit["index"] for fit in fits] == [0, 1, 2]
+        assert fits[-1]["error"] == "abandoned after 1 s"
+        assert any(fit["error"] == f"superseded by fit {fit['index'] + 1}" for fit in fits)
+
+        page, problems = open_page(browser, f"{service.url}/curricula/kuka-slow-fits", service)
+        rows = page.locator("#fit-rows tr")
+        rows.nth(2).wait_for()
+        for row, fit in zip(rows.all(), reversed(fits), strict=True):
+            index, _, _, outcome = row.locator("td").all_inner_texts()
+            assert index == str(fit["index"]), "newest first"
+            assert outcome.startswith(f"{fit['error']}: ")
+            if fit["error"].startswith("superseded"):
+                assert outcome.endswith("the next fit fell due before this one could start, so this one was skipped")
+                assert row.locator("td").nth(3).get_attribute("class") == "skipped"
+            else:
+                assert "it ran past the time limit (KC_FIT_TIMEOUT_S)" in outcome
+                assert outcome.endswith("the teacher kept its model")
+                assert row.locator("td").nth(3).get_attribute("class") == "failed"
+        assert page.inner_text("#fits-note").endswith("3 not installed")
+        assert page.locator("#fits-stopped").is_hidden()
+        assert problems == PageProblems()
+        page.close()

@@ -239,7 +239,8 @@ def test_state_shows_the_teacher_and_recent_results(http, kuka_space):
 
 def test_refits_run_while_tasks_keep_being_served(http, kuka_space):
     """A task request made right after the result that triggers a fit is answered before that
-    fit finishes, from the previous model."""
+    fit finishes, from the previous model. (Each fit is let finish before the next falls due: one
+    falling due while the last still waits for a fit process would replace it.)"""
     _create(http, "refit-a", kuka_space, teacher="alp-gmm", params={"fit_rate": 100}, seed=3)
     answered_at = []
     for _ in range(2):
@@ -252,9 +253,9 @@ def test_refits_run_while_tasks_keep_being_served(http, kuka_space):
         answered_at.append(time.time())
         pending = _counters(http, "refit-a")["fits_pending"]
         assert pending >= 1, "the fit finished before the next request: nothing was overlapped"
-    deadline = time.monotonic() + 120
-    while _counters(http, "refit-a")["fits_pending"] and time.monotonic() < deadline:
-        time.sleep(0.1)
+        deadline = time.monotonic() + 120
+        while _counters(http, "refit-a")["fits_pending"] and time.monotonic() < deadline:
+            time.sleep(0.1)
     state = http.get("/curricula/refit-a/state").json()
     fits = state["fits"]
     assert [f["index"] for f in fits] == [0, 1] and not any(f["replayed"] or f["error"] for f in fits)

@@ -1,6 +1,9 @@
 import argparse
 from pathlib import Path
 
+import pytest
+from pydantic import ValidationError
+
 from teacher_service.cli import add_arguments, settings_from
 
 
@@ -25,3 +28,19 @@ def test_flags_override_environment_which_overrides_defaults(monkeypatch):
     assert settings.db == Path("/tmp/from-env.db")
     assert settings.teacher_token is not None and settings.teacher_token.get_secret_value() == "s3cret"
     assert "s3cret" not in repr(settings)
+
+
+def test_fit_settings_come_from_flags_or_environment_within_their_bounds(monkeypatch):
+    assert (settings_from(_parse()).fit_processes, settings_from(_parse()).fit_timeout_s) == (2, 60.0)
+    monkeypatch.setenv("KC_FIT_PROCESSES", "3")
+    monkeypatch.setenv("KC_FIT_TIMEOUT_S", "90")
+    settings = settings_from(_parse("--fit-timeout", "120"))
+    assert (settings.fit_processes, settings.fit_timeout_s) == (3, 120.0)
+    for flags in (
+        ["--fit-processes", "0"],
+        ["--fit-processes", "9"],
+        ["--fit-timeout", "0.5"],
+        ["--fit-timeout", "4000"],
+    ):
+        with pytest.raises(ValidationError):
+            settings_from(_parse(*flags))

@@ -13,7 +13,7 @@ router = APIRouter(tags=["service"])
 
 @router.get("/healthz")
 async def healthz(registry: RegistryDep) -> Health:
-    return Health(curricula=len(registry))
+    return Health(curricula=len(registry), fits_stopped=registry.fits_stopped)
 
 
 @router.get(

@@ -12,6 +12,7 @@ const SCATTER_RESULTS = 1000; // newest results drawn in the task space
 const DIFFICULTY_RESULTS = 300; // newest results placed on the difficulty strips
 const DIFFICULTY_BINS = 20;
 const ELLIPSE_SIGMAS = 2;
+const FIT_ROWS = 12; // newest fits listed
 
 const REWARD_SCALE = "Viridis";
 const ALP_SCALE = [[0, "#fca5a5"], [0.5, "#ef4444"], [1, "#7f1d1d"]];
@@ -165,7 +166,15 @@ function axis(title, extra) {
 
 /* ---------- the curricula list ---------- */
 
+/** Says why fits stopped, if they did; the service stops them all at once, so one reason covers every curriculum. */
+function showFitsStopped(reason) {
+  const alert = document.getElementById("fits-stopped");
+  alert.hidden = !reason;
+  alert.textContent = reason ? `No fits run: ${reason}. Tasks still come from each teacher's last model.` : "";
+}
+
 function renderCurricula(list) {
+  showFitsStopped(list.curricula.map((c) => c.counters.fits_stopped).find((reason) => reason) ?? null);
   const rows = document.getElementById("curricula-rows");
   rows.replaceChildren(
     ...list.curricula.map((curriculum) => {
@@ -209,6 +218,7 @@ function renderCurriculum(state) {
   renderTaskSpace();
   renderAlp(state);
   renderDifficulty(state);
+  renderFits(state);
 }
 
 function setUpDimensions(space) {
@@ -545,6 +555,42 @@ function renderLesson(state) {
     params.append(item);
   }
   box.replaceChildren(summary, params);
+}
+
+/** What became of a fit, in words a reader needs no source code for, and the class that colours it. */
+function fitOutcome(fit) {
+  if (fit.error === null) return [fit.replayed ? "installed (redone at startup)" : "installed", ""];
+  if (fit.error.startsWith("superseded by")) {
+    return [`${fit.error}: the next fit fell due before this one could start, so this one was skipped`, "skipped"];
+  }
+  if (fit.error.startsWith("abandoned after")) {
+    return [`${fit.error}: it ran past the time limit (KC_FIT_TIMEOUT_S), so its process was killed; the teacher kept its model`, "failed"];
+  }
+  return [`not installed: ${fit.error}; the teacher kept its model`, "failed"];
+}
+
+function renderFits(state) {
+  showFitsStopped(state.curriculum.counters.fits_stopped);
+  const fits = state.fits.slice(-FIT_ROWS).reverse();
+  const notInstalled = state.fits.filter((fit) => fit.error !== null).length;
+  const listed = fits.length < state.fits.length ? `, the newest ${fits.length} listed` : "";
+  setText("fits-note", state.fits.length ? `last ${state.fits.length}${listed} · ${notInstalled} not installed` : "");
+  document.getElementById("fit-rows").replaceChildren(
+    ...fits.map((fit) => {
+      const [outcome, className] = fitOutcome(fit);
+      const row = document.createElement("tr");
+      for (const [text, cellClass] of [
+        [String(fit.index), "number"],
+        [clock(fit.finished_at), ""],
+        [className === "skipped" ? "–" : `${fit.duration_s.toFixed(2)} s`, "number"],
+        [outcome, className],
+      ]) {
+        row.append(Object.assign(document.createElement("td"), { textContent: text, className: cellClass }));
+      }
+      return row;
+    }),
+  );
+  document.getElementById("fits-empty").hidden = fits.length > 0;
 }
 
 /* ---------- start ---------- */
