@@ -11,7 +11,9 @@ What it guarantees:
 
 - One pooled HTTP connection per client, and retries with exponential backoff and jitter on
   connection errors, timeouts, 5xx, 408 and 429. Results are idempotent per task id on the
-  service, so resending after a lost answer is safe.
+  service, so resending after a lost answer is safe. A 503 is what the service answers when its
+  database refuses a write (disk full, read-only file): nothing of that request was stored, so it
+  is retried like an outage, and the service's reason is logged.
 - ``report`` never waits for the network: results go into a buffer that a background thread
   delivers in batches. Through a teacher outage the buffer keeps them and the thread keeps
   retrying until the teacher is back, so no result the caller handed over is lost while the
@@ -362,17 +364,22 @@ class TeacherClient:
         except httpx.TransportError as error:
             raise _Transient(f"{type(error).__name__}: {error}") from None
         if response.status_code >= 500 or response.status_code in _RETRYABLE_STATUS:
-            raise _Transient(f"HTTP {response.status_code}")
+            raise _Transient(f"HTTP {response.status_code}: {_detail(response)}")
         if response.status_code >= 400:
-            try:
-                detail = response.json().get("detail", response.text)
-            except ValueError:
-                detail = response.text
-            raise TeacherRequestError(response.status_code, detail, method, path)
+            raise TeacherRequestError(response.status_code, _detail(response), method, path)
         try:
             return response.json()
         except ValueError:
             raise _Transient(f"HTTP {response.status_code} with a body that is not JSON") from None
+
+
+def _detail(response: httpx.Response) -> Any:
+    """The service's explanation (FastAPI's ``detail``), else the body as text."""
+    try:
+        answer = response.json()
+    except ValueError:
+        return response.text
+    return answer.get("detail", response.text) if isinstance(answer, dict) else response.text
 
 
 def _invalid_items(error: TeacherRequestError, batch_size: int) -> set[int]:
