@@ -49,6 +49,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import httpx
+from pydantic import SecretStr
 
 from common.schemas import (
     API_PREFIX,
@@ -123,7 +124,7 @@ class TeacherClient:
         base_url: str,
         curriculum: str,
         *,
-        token: str | None = None,
+        token: str | SecretStr | None = None,
         prefetch: int = 8,
         task_timeout: float = 10.0,
         request_timeout: float = 10.0,
@@ -143,7 +144,9 @@ class TeacherClient:
         self.task_timeout = task_timeout
         self.backoff = backoff
         self.report_interval = report_interval
-        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        secret = token.get_secret_value() if isinstance(token, SecretStr) else token
+        # httpx masks the Authorization header in its reprs; the client keeps no other copy.
+        headers = {"Authorization": f"Bearer {secret}"} if secret else {}
         self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=request_timeout)
         self._path = f"{API_PREFIX}/curricula/{curriculum}"
 

@@ -16,8 +16,9 @@ from fastapi.exceptions import RequestValidationError
 
 from teacher_service.api.docs import add_offline_docs
 from teacher_service.api.errors import store_error_handler, validation_error_handler
+from teacher_service.api.hosts import AllowedHostsMiddleware
 from teacher_service.api.routes import curricula, health
-from teacher_service.core.config import Settings
+from teacher_service.core.config import ANY_HOST, Settings
 from teacher_service.curricula import CurriculumRegistry
 from teacher_service.dashboard import router as dashboard_router
 from teacher_service.metrics import MetricsMiddleware, ServiceMetrics
@@ -76,4 +77,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(dashboard_router)
     add_offline_docs(app)
     app.add_middleware(MetricsMiddleware, metrics=service_metrics)
+    if ANY_HOST not in settings.host_names():
+        app.add_middleware(AllowedHostsMiddleware, allowed=settings.host_names())
     return app
