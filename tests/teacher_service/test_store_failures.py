@@ -8,6 +8,7 @@ through SQLite's ``max_page_count``, and exceptions that are not SQLite's from t
 from __future__ import annotations
 
 import asyncio
+import logging
 import sqlite3
 import threading
 from collections.abc import Callable, Iterator
@@ -19,6 +20,8 @@ import httpx
 import pytest
 import uvicorn
 
+from common.task_space import KUKA_TASK_SPACE
+from common.teacher_client import Backoff, TeacherClient
 from teacher_service.app import create_app
 from teacher_service.core.config import Settings
 from teacher_service.process import free_port
@@ -212,3 +215,23 @@ def test_every_write_of_a_failed_group_is_answered(service: InProcessService, ku
     assert set(statuses) <= {200, 503}
     with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=ANSWER_WITHIN_S) as after:
         assert all(_draw(after, name, 1).status_code == 200 for name in names)
+
+
+def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_room(
+    service: InProcessService, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="common.teacher_client")
+    with TeacherClient(service.url, "client", token=TOKEN, prefetch=1000, backoff=Backoff(0.01, 0.2)) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        assignments = [client.next_task() for _ in range(1000)]
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))
+        for assignment in assignments:
+            client.report(assignment, reward=1.0)
+        assert not client.flush(timeout=2.0)
+        assert client.pending == 1000 and client.delivered == 0
+        assert "HTTP 503: the teacher's database could not store this request: database or disk is full" in caplog.text
+
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+        assert client.flush(timeout=30)
+        assert client.delivered == 1000
+    assert _stored_results(service.store.path, "client") == {a.task_id for a in assignments}
