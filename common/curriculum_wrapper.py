@@ -39,6 +39,7 @@ from typing import Any, SupportsFloat
 
 import gymnasium
 from gymnasium.core import ActType, ObsType
+from pydantic import SecretStr
 
 from common.schemas import TeacherKind
 from common.task_space import Task, TaskSpace
@@ -48,10 +49,9 @@ from common.teacher_client import (
     TeacherRequestError,
     TeacherUnavailable,
 )
+from common.write_token import TOKEN_VARIABLE
 
 log = logging.getLogger(__name__)
-
-TOKEN_VARIABLE = "KC_TEACHER_TOKEN"
 
 ApplyTask = Callable[[gymnasium.Env[Any, Any], Task], None]
 """Sets a task's parameters on an environment before its reset, e.g. ``env.unwrapped.g = task["gravity"]``."""
@@ -86,7 +86,7 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         *,
         register: CurriculumRegistration | None = None,
         apply_task: ApplyTask | None = None,
-        token: str | None = None,
+        token: str | SecretStr | None = None,
         prefetch: int = 16,
         task_timeout: float = 5.0,
         report_interval: float = 1.0,
@@ -104,7 +104,7 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         self._client_key = _ClientKey(
             url=self.teacher_url,
             curriculum=curriculum,
-            token=token if token is not None else os.environ.get(TOKEN_VARIABLE) or None,
+            token=_secret(token if token is not None else os.environ.get(TOKEN_VARIABLE)),
             prefetch=prefetch,
             task_timeout=task_timeout,
             report_interval=report_interval,
@@ -178,7 +178,8 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
 class _ClientKey:
     url: str
     curriculum: str
-    token: str | None
+    token: SecretStr | None
+    """A ``SecretStr``, so that a repr of the key (in a traceback, a log) does not show it."""
     prefetch: int
     task_timeout: float
     report_interval: float
@@ -193,6 +194,13 @@ class _ClientKey:
             request_timeout=request_timeout,
             report_interval=self.report_interval,
         )
+
+
+def _secret(token: str | SecretStr | None) -> SecretStr | None:
+    """The token as a ``SecretStr``; an empty one is none."""
+    if isinstance(token, str):
+        token = SecretStr(token)
+    return token if token is not None and token.get_secret_value() else None
 
 
 def _check_curriculum(key: _ClientKey, register: CurriculumRegistration | None, timeout: float) -> None:

@@ -11,13 +11,24 @@ What it guarantees:
 
 - One pooled HTTP connection per client, and retries with exponential backoff and jitter on
   connection errors, timeouts, 5xx, 408 and 429. Results are idempotent per task id on the
-  service, so resending after a lost answer is safe.
+  service, so resending after a lost answer is safe. A 503 is what the service answers when its
+  database refuses a write (disk full, read-only file): nothing of that request was stored, so it
+  is retried like an outage, and the service's reason is logged.
 - ``report`` never waits for the network: results go into a buffer that a background thread
   delivers in batches. Through a teacher outage the buffer keeps them and the thread keeps
   retrying until the teacher is back, so no result the caller handed over is lost while the
-  process lives. The one exception is a result the service rejects as invalid (a 422 naming it,
-  such as a task id from a wiped database): it can never be accepted, so it is logged, counted in
-  ``rejected`` and dropped, and the rest of its batch is resent.
+  process lives, up to ``max_buffered_results`` of them. Two exceptions:
+
+  - A result the service rejects as invalid (a 422 naming it, such as a task id from a wiped
+    database) can never be accepted, so it is logged, counted in ``rejected`` and dropped, and the
+    rest of its batch is resent.
+  - An outage long enough to fill the buffer: from then on each new result pushes out the oldest
+    one waiting, counted in ``dropped_results``. The oldest go because the teacher learns from how
+    the *current* policy does on its tasks, which the newest results tell best; and there is a
+    bound because an outage of days would otherwise take the worker's memory (about 0.6 KB a
+    result: 60 MB at the default 100,000). A warning is logged when a burst of drops starts, and
+    one with the burst's count when the teacher takes results again. The service keeps the tasks
+    of dropped results as issued and unanswered.
 - ``next_task`` serves tasks from a prefetched batch. When the batch is used up and the teacher
   cannot be reached within ``task_timeout``, it returns an *offline* assignment
   (``task_id is None``): the recent tasks the teacher issued, taken in turn, so a worker keeps
@@ -47,6 +58,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import httpx
+from pydantic import SecretStr
 
 from common.schemas import (
     API_PREFIX,
@@ -121,27 +133,35 @@ class TeacherClient:
         base_url: str,
         curriculum: str,
         *,
-        token: str | None = None,
+        token: str | SecretStr | None = None,
         prefetch: int = 8,
         task_timeout: float = 10.0,
         request_timeout: float = 10.0,
         recent_tasks: int = 64,
         backoff: Backoff = Backoff(),
         report_interval: float = 0.0,
+        max_buffered_results: int = 100_000,
     ) -> None:
         """``prefetch`` tasks are drawn per request; ``task_timeout`` bounds how long ``next_task``
         keeps retrying before it hands out an offline assignment; ``recent_tasks`` issued tasks are
         remembered for those. After each delivery the sender waits ``report_interval`` seconds, so
         that the results reported meanwhile go out in one request (``flush`` and ``close`` cut the
-        wait short): one request per result costs a producer of short episodes a few milliseconds each."""
+        wait short): one request per result costs a producer of short episodes a few milliseconds each.
+        At most ``max_buffered_results`` results wait for delivery; beyond that the oldest are dropped
+        (see the module doc)."""
         if not 1 <= prefetch <= MAX_TASKS_PER_REQUEST:
             raise ValueError(f"prefetch must be in [1, {MAX_TASKS_PER_REQUEST}], got {prefetch}")
+        if max_buffered_results < 1:
+            raise ValueError(f"max_buffered_results must be at least 1, got {max_buffered_results}")
         self.curriculum = curriculum
         self.prefetch = prefetch
         self.task_timeout = task_timeout
         self.backoff = backoff
         self.report_interval = report_interval
-        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self.max_buffered_results = max_buffered_results
+        secret = token.get_secret_value() if isinstance(token, SecretStr) else token
+        # httpx masks the Authorization header in its reprs; the client keeps no other copy.
+        headers = {"Authorization": f"Bearer {secret}"} if secret else {}
         self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=request_timeout)
         self._path = f"{API_PREFIX}/curricula/{curriculum}"
 
@@ -152,6 +172,7 @@ class TeacherClient:
         self._offline = False
 
         self._results: deque[ResultItem] = deque()
+        self._burst_dropped = 0
         self._results_changed = threading.Condition()
         self._stop = threading.Event()
         self._flushing = 0
@@ -162,6 +183,8 @@ class TeacherClient:
         """Results the service refused as invalid; dropped (see module doc)."""
         self.offline_results = 0
         """Results of offline assignments; not sent."""
+        self.dropped_results = 0
+        """Results dropped, oldest first, because ``max_buffered_results`` were waiting (see module doc)."""
         self._sender = threading.Thread(target=self._deliver_forever, name="teacher-results", daemon=True)
         self._sender.start()
 
@@ -233,7 +256,26 @@ class TeacherClient:
                 self.offline_results += 1
                 return
             self._results.append(ResultItem(task_id=assignment.task_id, reward=reward, success=success, length=length))
+            burst_starts = len(self._results) > self.max_buffered_results and self._drop_oldest()
             self._results_changed.notify_all()
+        if burst_starts:
+            log.warning(
+                "%d results are waiting for the teacher at %s, the most this client keeps (max_buffered_results): "
+                "dropping the oldest for each new one until it takes results again",
+                self.max_buffered_results,
+                self._http.base_url,
+            )
+
+    def _drop_oldest(self) -> bool:
+        """Drop the oldest result (with the lock held); True if a burst of drops starts.
+
+        The oldest may be in the batch the sender is delivering. It still goes out with it, and
+        settling the batch then pops as many results from the head, the next oldest: what stays
+        waiting is the newest, and the count of lost results is the same."""
+        self._results.popleft()
+        self.dropped_results += 1
+        self._burst_dropped += 1
+        return self._burst_dropped == 1
 
     @property
     def pending(self) -> int:
@@ -318,6 +360,7 @@ class TeacherClient:
             self._fatal = None
             self.delivered += len(batch)
             self._settle(batch, keep=[])
+            self._end_drop_burst()
             self._let_results_gather()
 
     def _let_results_gather(self) -> None:
@@ -337,6 +380,16 @@ class TeacherClient:
                 self._results.popleft()
             self._results.extendleft(reversed(keep))
             self._results_changed.notify_all()
+
+    def _end_drop_burst(self) -> None:
+        with self._results_changed:
+            dropped, self._burst_dropped = self._burst_dropped, 0
+        if dropped:
+            log.warning(
+                "the teacher takes results again; %d results were dropped while it did not (%d by this client in all)",
+                dropped,
+                self.dropped_results,
+            )
 
     def _fail(self, error: TeacherRequestError) -> None:
         log.error("results cannot be delivered: %s", error)
@@ -362,17 +415,22 @@ class TeacherClient:
         except httpx.TransportError as error:
             raise _Transient(f"{type(error).__name__}: {error}") from None
         if response.status_code >= 500 or response.status_code in _RETRYABLE_STATUS:
-            raise _Transient(f"HTTP {response.status_code}")
+            raise _Transient(f"HTTP {response.status_code}: {_detail(response)}")
         if response.status_code >= 400:
-            try:
-                detail = response.json().get("detail", response.text)
-            except ValueError:
-                detail = response.text
-            raise TeacherRequestError(response.status_code, detail, method, path)
+            raise TeacherRequestError(response.status_code, _detail(response), method, path)
         try:
             return response.json()
         except ValueError:
             raise _Transient(f"HTTP {response.status_code} with a body that is not JSON") from None
+
+
+def _detail(response: httpx.Response) -> Any:
+    """The service's explanation (FastAPI's ``detail``), else the body as text."""
+    try:
+        answer = response.json()
+    except ValueError:
+        return response.text
+    return answer.get("detail", response.text) if isinstance(answer, dict) else response.text
 
 
 def _invalid_items(error: TeacherRequestError, batch_size: int) -> set[int]:

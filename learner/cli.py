@@ -19,15 +19,15 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from pydantic import SecretStr
+
+from common.write_token import TOKEN_VARIABLE, token_problem
 from learner.arguments import add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
 DEFAULTS = TrainConfig()
 RAY_CONNECT_TIMEOUT_S = 5.0
 TEACHER_CONNECT_TIMEOUT_S = 10.0
-STATUS_TIMEOUT_S = 1.0
-TOKEN_VARIABLE = "KC_TEACHER_TOKEN"
-"""The teacher service's bearer token, read from the environment (never a flag: flags show in ``ps``)."""
 PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
 """The teacher's address as a person's browser reaches it, when it differs from ``--teacher-url``
 (in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
@@ -151,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from learner.checkpoint import latest_checkpoint, load_checkpoint
 
+    token = _token_from_environment()
     checkpoint = None
     if args.resume or args.resume_if_exists:
         if args.run_dir is None:
@@ -175,11 +176,22 @@ def _train(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         teacher_url = _teacher(args.teacher_url, run_dir, stack)
         name = curriculum_name(run_dir)
-        token = os.environ.get(TOKEN_VARIABLE) or None
         _register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         _connect_ray(args.ray_address, config.workers, stack)
         return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
+
+
+def _token_from_environment() -> SecretStr | None:
+    """The teacher service's bearer token, from ``KC_TEACHER_TOKEN`` (never a flag: flags show in
+    ``ps``); refused before anything starts when it is a placeholder or too short to be secret."""
+    token = os.environ.get(TOKEN_VARIABLE) or None
+    if token is None:
+        return None
+    problem = token_problem(token)
+    if problem is not None:
+        raise UsageError(problem)
+    return SecretStr(token)
 
 
 def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str:
@@ -203,7 +215,7 @@ def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str
     return url
 
 
-def _register_curriculum(url: str, name: str, config: TrainConfig, token: str | None) -> None:
+def _register_curriculum(url: str, name: str, config: TrainConfig, token: SecretStr | None) -> None:
     from common.task_space import KUKA_TASK_SPACE
     from common.teacher_client import TeacherClient, TeacherClientError
 
@@ -254,12 +266,12 @@ def _run_training(
     teacher_url: str,
     dashboard_url: str,
     name: str,
-    token: str | None,
+    token: SecretStr | None,
     checkpoint: Any,
 ) -> int:
     from tqdm import tqdm
 
-    from common.teacher_client import TeacherClient
+    from learner.teacher_status import TeacherStatus
     from learner.trainer import IterationReport, Trainer
 
     trainer = Trainer(
@@ -280,13 +292,12 @@ def _run_training(
     def on_iteration(report: IterationReport) -> None:
         progress.update(report.counters.steps - progress.n)
         progress.set_postfix_str(
-            f"mean reward {report.recent_reward:.2f} | success {report.recent_success_rate:.0%}"
-            f" | {_teacher_summary(status)}",
+            f"mean reward {report.recent_reward:.2f} | success {report.recent_success_rate:.0%} | {status.summary}",
             refresh=False,
         )
 
     with (
-        TeacherClient(teacher_url, name, token=token, request_timeout=STATUS_TIMEOUT_S) as status,
+        TeacherStatus(teacher_url, name) as status,
         tqdm(
             total=config.total_steps, initial=start, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1
         ) as progress,
@@ -299,14 +310,3 @@ def _run_training(
                 signal.signal(signum, handler)
     print(f"final checkpoint: {final}")
     return 0
-
-
-def _teacher_summary(client: Any) -> str:
-    from common.teacher_client import TeacherClientError
-
-    try:
-        info = client.info(timeout=STATUS_TIMEOUT_S)
-    except TeacherClientError:
-        return "teacher unreachable"
-    counters = info.counters
-    return f"{info.config.teacher}: {counters.results_received:_} results, {counters.fits_completed} fits"

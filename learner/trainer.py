@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import ray
 import torch
+from pydantic import SecretStr
 
 from common.policy import PolicySnapshot
 from common.trajectory import EpisodeStats, TrajectoryBatch
@@ -64,7 +65,7 @@ class Trainer:
         run_dir: Path,
         teacher_url: str,
         curriculum: str,
-        teacher_token: str | None = None,
+        teacher_token: SecretStr | None = None,
         resume_from: Checkpoint | None = None,
         actor_name_prefix: str | None = None,
     ) -> None:

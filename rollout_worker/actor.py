@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import ray
 import torch
+from pydantic import SecretStr
 
 from common.kuka_env import KukaGraspEnv
 from common.policy import InferencePolicy, PolicySnapshot
@@ -34,7 +35,8 @@ class WorkerSettings:
     num_envs: int
     rollout_length: int
     max_episode_steps: int
-    teacher_token: str | None = None
+    teacher_token: SecretStr | None = None
+    """Held as a ``SecretStr`` so that no repr or log line of the settings shows it."""
 
 
 class _TeacherTasks:

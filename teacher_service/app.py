@@ -15,13 +15,14 @@ from fastapi import FastAPI
 from fastapi.exceptions import RequestValidationError
 
 from teacher_service.api.docs import add_offline_docs
-from teacher_service.api.errors import validation_error_handler
+from teacher_service.api.errors import store_error_handler, validation_error_handler
+from teacher_service.api.hosts import AllowedHostsMiddleware
 from teacher_service.api.routes import curricula, health
-from teacher_service.core.config import Settings
+from teacher_service.core.config import ANY_HOST, Settings
 from teacher_service.curricula import CurriculumRegistry
 from teacher_service.dashboard import router as dashboard_router
 from teacher_service.metrics import MetricsMiddleware, ServiceMetrics
-from teacher_service.store import Store
+from teacher_service.store import Store, StoreError
 
 YOUNG_GENERATION_THRESHOLD = 20_000
 """Allocations between young-generation collections (Python's default is 700): a request allocates
@@ -70,9 +71,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.metrics = service_metrics
     app.add_exception_handler(RequestValidationError, validation_error_handler)
+    app.add_exception_handler(StoreError, store_error_handler)
     app.include_router(health.router)
     app.include_router(curricula.router)
     app.include_router(dashboard_router)
     add_offline_docs(app)
     app.add_middleware(MetricsMiddleware, metrics=service_metrics)
+    if ANY_HOST not in settings.host_names():
+        app.add_middleware(AllowedHostsMiddleware, allowed=settings.host_names())
     return app

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from teacher_service.core.config import Settings
 
@@ -46,12 +49,25 @@ def settings_from(args: argparse.Namespace) -> Settings:
     return Settings(**{name: value for name, value in flags.items() if value is not None})
 
 
+def _explain(problem: Mapping[str, Any]) -> str:
+    """One settings error in a line, named by its environment variable."""
+    message = str(problem["msg"]).removeprefix("Value error, ")
+    variable = "KC_" + "_".join(str(part) for part in problem["loc"][:1]).upper()
+    return message if message.startswith(variable) else f"{variable}: {message}"
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
+    from pydantic import ValidationError
 
     from teacher_service.app import create_app
 
-    settings = settings_from(args)
+    try:
+        settings = settings_from(args)
+    except ValidationError as error:
+        for problem in error.errors():
+            print(f"kuka-curriculum serve: error: {_explain(problem)}", file=sys.stderr)
+        return 2
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     uvicorn.run(
         create_app(settings),

@@ -261,29 +261,48 @@ class Store:
     def _flush(self) -> None:
         group, self._pending = self._pending, []
         if group:
-            self._commit(group)
-            self._complete(group)
+            try:
+                self._commit(group)
+            finally:
+                self._complete(group)
 
     def _commit(self, group: list[_Write]) -> None:
-        """Commit the group in one transaction; a failing write is rolled back alone."""
+        """Commit the group in one transaction; a write whose statements fail is rolled back alone.
+
+        Any other failure (of BEGIN, a savepoint or COMMIT; SQLite, I/O or anything else) rolls the
+        whole group back and fails every write of it: a transaction left open would keep every later
+        write from starting, and requests waiting on this group would never be answered.
+        """
         try:
+            if self._db.in_transaction:  # left open by a failure whose rollback failed too
+                self._db.execute("ROLLBACK")
             self._db.execute("BEGIN IMMEDIATE")
             for write in group:
                 self._db.execute("SAVEPOINT one_write")
                 try:
                     for sql, rows in write.statements:
                         self._db.executemany(sql, rows)
-                except sqlite3.Error as error:
+                except Exception as error:
+                    if not self._db.in_transaction:
+                        raise  # SQLite rolled the whole transaction back (disk full, I/O error)
                     self._db.execute("ROLLBACK TO one_write")
                     write.error = error
                 self._db.execute("RELEASE one_write")
             self._db.execute("COMMIT")
-        except sqlite3.Error as error:
+        except BaseException as error:
             log.exception("commit of %d writes failed", len(group))
+            self._roll_back()
+            for write in group:
+                write.error = write.error or error
+            if not isinstance(error, Exception):
+                raise
+
+    def _roll_back(self) -> None:
+        try:
             if self._db.in_transaction:
                 self._db.execute("ROLLBACK")
-            for write in group:
-                write.error = error
+        except sqlite3.Error:
+            log.exception("rollback failed; the next write retries it")
 
     @staticmethod
     def _complete(group: list[_Write]) -> None:
@@ -292,7 +311,7 @@ class Store:
             if write.error is None:
                 callback, outcome = write.on_commit, None
             else:
-                callback, outcome = write.on_abort, StoreError(f"write not stored: {write.error}")
+                callback, outcome = write.on_abort, StoreError(_reason(write.error))
             try:
                 if callback is not None:
                     callback()
@@ -307,3 +326,11 @@ class Store:
                     write.future.set_result(None)
                 else:
                     write.future.set_exception(outcome)
+
+
+def _reason(error: BaseException) -> str:
+    """Why a write failed, in words for whoever sent it: SQLite's own message says it best
+    ("database or disk is full", "attempt to write a readonly database"); anything else is named."""
+    if isinstance(error, sqlite3.Error):
+        return str(error)
+    return f"{type(error).__name__}: {error}"

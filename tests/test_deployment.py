@@ -1,11 +1,12 @@
 """The Docker deployment's files, checked in seconds without a Docker engine.
 
 Nothing is built or started here (``test_docker_stack.py`` builds the image and runs the stack);
-a mistake in a file is named here precisely instead. What is checked: Debian's ``docker-compose config`` accepts
-``docker-compose.yml`` with ``.env.example``; every service's command is a real invocation of the
-program it runs (our own argparse sub-commands, Ray's click commands, TensorBoard's flags); ports,
-volumes and environment agree with each other and with the teacher's ``Settings``; and the
-``Dockerfile`` copies what exists and starts the console script.
+a mistake in a file is named here precisely instead. What is checked: Debian's ``docker-compose
+config`` accepts ``docker-compose.yml`` with ``.env.example`` once its token is filled in, and
+refuses it before; every service's command is a real invocation of the program it runs (our own
+argparse sub-commands, Ray's click commands, TensorBoard's flags); ports, volumes and environment
+agree with each other and with the teacher's ``Settings``; and the ``Dockerfile`` copies what
+exists and starts the console script.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SERVICES = {"teacher", "ray-head", "ray-worker", "learner", "tensorboard"}
 TOKEN_HOLDERS = {"teacher", "learner"}
 """The teacher checks the token; the learner writes with it and hands it to its rollout actors."""
+FILLED_IN_TOKEN = "deployment-test-token-0123456789"
+"""What a user puts in ``.env`` where ``.env.example`` leaves the token empty."""
 
 
 # --- reading the files --------------------------------------------------------------------------
@@ -165,12 +168,17 @@ PARSERS = {"kuka-curriculum": parse_kuka_curriculum, "ray": parse_ray, "tensorbo
 
 @pytest.fixture(scope="module")
 def env_example() -> dict[str, str]:
-    return read_env_file(ROOT / ".env.example")
+    """``.env.example`` as a user fills it in: with a token of their own."""
+    example = read_env_file(ROOT / ".env.example")
+    assert example[LEARNER_TOKEN_VARIABLE] == "", ".env.example must not hold a token anyone could use as it is"
+    return {**example, LEARNER_TOKEN_VARIABLE: FILLED_IN_TOKEN}
 
 
 @pytest.fixture(scope="module")
-def compose() -> dict[str, Any]:
-    return load_compose(ROOT / ".env.example")
+def compose(tmp_path_factory: pytest.TempPathFactory, env_example: dict[str, str]) -> dict[str, Any]:
+    env_file = tmp_path_factory.mktemp("compose") / "filled-in.env"
+    env_file.write_text("".join(f"{name}={value}\n" for name, value in env_example.items()))
+    return load_compose(env_file)
 
 
 @pytest.fixture(scope="module")
@@ -228,12 +236,31 @@ def test_compose_file_is_valid_and_has_every_role(services: dict[str, dict[str, 
     assert set(services) == SERVICES
 
 
-def test_compose_refuses_to_run_without_a_teacher_token(tmp_path: Path) -> None:
+@pytest.mark.parametrize("env_file", ["no-token.env", ".env.example"])
+def test_compose_refuses_to_run_without_a_teacher_token_and_says_how_to_make_one(tmp_path: Path, env_file: str) -> None:
     no_token = tmp_path / "no-token.env"
     no_token.write_text("TEACHER=alp-gmm\n")
-    result = compose_config(no_token)
+    result = compose_config(no_token if env_file == "no-token.env" else ROOT / env_file)
     assert result.returncode != 0
     assert "KC_TEACHER_TOKEN" in result.stderr
+    assert "secrets.token_urlsafe(32)" in result.stderr
+
+
+def test_teacher_answers_the_host_names_the_stack_uses(services: dict[str, dict[str, Any]]) -> None:
+    teacher = services["teacher"]
+    environment = environment_of(teacher)
+    settings = Settings(
+        teacher_token=environment[LEARNER_TOKEN_VARIABLE], allowed_hosts=environment.get("KC_ALLOWED_HOSTS")
+    )
+    names = set(settings.host_names())
+    train = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
+    probe = " ".join(teacher["healthcheck"]["test"])
+    used = {
+        urlsplit(train.teacher_url).hostname,
+        urlsplit(re.search(r"http://[^'\" ]+", probe).group()).hostname,
+        urlsplit(environment_of(services["learner"])[PUBLIC_URL_VARIABLE]).hostname,
+    }
+    assert "*" in names or used <= names, f"the teacher answers {sorted(names)}, the stack reaches it as {sorted(used)}"
 
 
 @pytest.mark.parametrize("name", sorted(SERVICES))

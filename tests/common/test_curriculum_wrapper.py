@@ -238,3 +238,12 @@ def test_a_forked_child_reports_through_a_client_of_its_own(service):
     play(env, 2)
     env.close()
     assert len(received(service, "echo-fork")) == 7
+
+
+def test_the_token_shows_in_no_repr(service, monkeypatch):
+    monkeypatch.setenv(TOKEN_VARIABLE, TOKEN)
+    for env in (wrap(service, "echo-repr", register=RANDOM_ECHO), wrap(service, "echo-repr", token=None)):
+        env.reset()
+        shown = [repr(env), str(env), repr(env._client_key), repr(vars(env)), repr(env._client)]
+        assert not [text for text in shown if TOKEN in text]
+        env.close()

@@ -5,6 +5,9 @@ The module shares one service (tests that kill it start it again); each test has
 
 from __future__ import annotations
 
+import logging
+import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -93,6 +96,49 @@ def test_no_result_is_lost_across_a_service_restart(service):
     state = httpx.get(f"{service.url}/api/v1/curricula/restart/state").json()
     assert state["curriculum"]["counters"]["results_received"] == 16
     assert sorted(r["task_id"] for r in state["recent_results"]) == sorted(a.task_id for a in assignments)
+
+
+def test_an_outage_longer_than_the_buffer_drops_the_oldest_results_and_says_so_once(service, caplog):
+    caplog.set_level(logging.WARNING, logger="common.teacher_client")
+    with _client(service, "bounded", prefetch=40, max_buffered_results=10) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        assignments = [client.next_task() for _ in range(40)]
+        service.kill()
+        for reward, assignment in enumerate(assignments):
+            client.report(assignment, reward=float(reward))
+        assert client.pending == 10 and client.dropped_results == 30
+        assert not client.flush(timeout=0.5)
+
+        service.start()
+        assert client.flush(timeout=30)
+        assert client.delivered == 10 and client.dropped_results == 30
+    state = httpx.get(f"{service.url}/api/v1/curricula/bounded/state").json()
+    delivered = {result["task_id"]: result["reward"] for result in state["recent_results"]}
+    newest = assignments[-10:]
+    assert delivered == {a.task_id: float(reward) for reward, a in enumerate(assignments) if a in newest}
+    drops = [record.getMessage() for record in caplog.records if "dropp" in record.getMessage()]
+    assert len(drops) == 2, drops
+    assert "the most this client keeps" in drops[0] and "30 results were dropped" in drops[1]
+
+
+def test_a_full_buffer_keeps_the_newest_while_a_batch_is_on_its_way(service):
+    """With the teacher hanging mid-delivery: the batch on its way is delivered, and of the rest the newest stay."""
+    with _client(service, "bounded-in-flight", prefetch=30, max_buffered_results=10) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        assignments = [client.next_task() for _ in range(30)]
+        os.kill(service.pid, signal.SIGSTOP)
+        try:
+            client.report(assignments[0], reward=1.0)
+            time.sleep(0.5)  # the sender has taken it as a batch of its own and waits for an answer
+            for assignment in assignments[1:]:
+                client.report(assignment, reward=2.0)
+            assert client.pending == 10 and client.dropped_results == 20
+        finally:
+            os.kill(service.pid, signal.SIGCONT)
+        assert client.flush(timeout=30)
+    state = httpx.get(f"{service.url}/api/v1/curricula/bounded-in-flight/state").json()
+    delivered = sorted(result["task_id"] for result in state["recent_results"])
+    assert delivered == sorted(a.task_id for a in assignments[:1] + assignments[-9:])
 
 
 def test_offline_assignments_keep_a_worker_busy_while_the_teacher_is_down(service):

@@ -93,3 +93,13 @@ def test_a_teacher_parameter_the_teacher_refuses_is_reported_before_training(tmp
     assert main(["train", "--teacher-param", "fit_rate=1", "--run-dir", str(tmp_path / "run")]) == 2
     error = capsys.readouterr().err
     assert "cannot register curriculum 'run'" in error and "fit_rate" in error
+
+
+@pytest.mark.parametrize(("token", "reason"), [("change-me", "placeholder"), ("0123456789", "too few to be secret")])
+def test_a_guessable_teacher_token_is_refused_before_anything_starts(tmp_path, capsys, monkeypatch, token, reason):
+    monkeypatch.setenv("KC_TEACHER_TOKEN", token)
+    assert main(["train", "--run-dir", str(tmp_path / "run")]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("kuka-curriculum train: error: KC_TEACHER_TOKEN ") and reason in error
+    assert "secrets.token_urlsafe(32)" in error
+    assert not (tmp_path / "run").exists(), "the refusal came after the run started"

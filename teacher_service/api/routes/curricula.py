@@ -37,6 +37,11 @@ _WRITE: dict[int | str, dict[str, Any]] = {
             "application/json": {"schema": ErrorMessage.model_json_schema()},
         },
     },
+    503: {
+        "model": ErrorMessage,
+        "description": "The database refused the write (e.g. disk full); nothing was stored. Retry after "
+        "the Retry-After header's seconds: results are idempotent, so resending is safe.",
+    },
 }
 
 

@@ -1,0 +1,237 @@
+"""A database that refuses writes makes the service answer 503 with the reason, never hang.
+
+The service runs in this process (a real uvicorn on a free port, serving the real app over a real
+SQLite file) so that failures can be injected into its store on its own event loop: a full disk
+through SQLite's ``max_page_count``, and exceptions that are not SQLite's from the connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import sqlite3
+import threading
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, TypeVar
+
+import httpx
+import pytest
+import uvicorn
+
+from common.task_space import KUKA_TASK_SPACE
+from common.teacher_client import Backoff, TeacherClient
+from teacher_service.app import create_app
+from teacher_service.core.config import Settings
+from teacher_service.process import free_port
+from teacher_service.store import Store
+
+TOKEN = "store-failure-test-token"
+ANSWER_WITHIN_S = 10.0
+"""Every request must be answered this soon, failure or not: before the fix, some never were."""
+
+T = TypeVar("T")
+
+
+class InProcessService:
+    """uvicorn serving ``create_app`` on a loop of its own thread; ``on_loop`` runs code there."""
+
+    def __init__(self, db: Path) -> None:
+        self.app = create_app(Settings(db=db, teacher_token=TOKEN, log_level="warning"))
+        self.port = free_port()
+        self.server = uvicorn.Server(
+            uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning", access_log=False)
+        )
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self.server.serve(),))
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    @property
+    def store(self) -> Store:
+        store: Store = self.app.state.registry._store
+        return store
+
+    def on_loop(self, function: Callable[[], T]) -> T:
+        """Run ``function`` on the service's event loop thread, where the store's connection lives."""
+
+        async def call() -> T:
+            return function()
+
+        return asyncio.run_coroutine_threadsafe(call(), self.loop).result(ANSWER_WITHIN_S)
+
+    def __enter__(self) -> InProcessService:
+        self.thread.start()
+        while not self.server.started:
+            if not self.thread.is_alive():
+                raise RuntimeError("the in-process service did not start")
+            self.thread.join(0.05)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.server.should_exit = True
+        self.thread.join(30)
+        self.loop.close()
+
+
+class FailingConnection:
+    """The store's SQLite connection, except that the next statement starting with ``prefix``
+    raises ``failure`` instead of running (once)."""
+
+    def __init__(self, db: sqlite3.Connection, prefix: str, failure: BaseException) -> None:
+        self.db = db
+        self.prefix = prefix
+        self.failure: BaseException | None = failure
+
+    def _check(self, sql: str) -> None:
+        if self.failure is not None and sql.startswith(self.prefix):
+            failure, self.failure = self.failure, None
+            raise failure
+
+    def execute(self, sql: str, *args: Any) -> sqlite3.Cursor:
+        self._check(sql)
+        return self.db.execute(sql, *args)
+
+    def executemany(self, sql: str, *args: Any) -> sqlite3.Cursor:
+        self._check(sql)
+        return self.db.executemany(sql, *args)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.db, name)
+
+
+@pytest.fixture
+def service(tmp_path: Path) -> Iterator[InProcessService]:
+    with InProcessService(tmp_path / "teacher.db") as running:
+        yield running
+
+
+@pytest.fixture
+def http(service: InProcessService) -> Iterator[httpx.Client]:
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=ANSWER_WITHIN_S) as client:
+        yield client
+
+
+def _create(http: httpx.Client, name: str, kuka_space: list[dict[str, Any]]) -> None:
+    response = http.put(f"/curricula/{name}", json={"teacher": "random", "space": kuka_space, "seed": 0})
+    assert response.status_code == 201, response.text
+
+
+def _draw(http: httpx.Client, name: str, count: int) -> httpx.Response:
+    return http.post(f"/curricula/{name}/tasks", json={"count": count})
+
+
+def _results(tasks: list[dict[str, Any]]) -> dict[str, Any]:
+    return {"results": [{"task_id": task["task_id"], "reward": 1.0, "success": True} for task in tasks]}
+
+
+def _refused(response: httpx.Response, reason: str) -> None:
+    assert response.status_code == 503, response.text
+    assert response.json()["detail"] == f"the teacher's database could not store this request: {reason}"
+    assert int(response.headers["Retry-After"]) > 0
+
+
+def _stored_results(db: Path, name: str) -> set[str]:
+    with sqlite3.connect(db) as connection:
+        rows = connection.execute(
+            "SELECT r.task_index FROM results r JOIN curricula c ON c.id = r.curriculum_id WHERE c.name = ?", (name,)
+        )
+        return {f"{name}:{index}" for (index,) in rows}
+
+
+def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is_room(
+    service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]
+) -> None:
+    _create(http, "full", kuka_space)
+    acknowledged = _draw(http, "full", 1000).json()["tasks"]
+    assert http.post("/curricula/full/results", json=_results(acknowledged[:20])).json()["accepted"] == 20
+
+    service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))  # never below the current size
+    # A thousand tasks, or results, need new pages, and there is no room for them.
+    _refused(_draw(http, "full", 1024), "database or disk is full")
+    refused_results = http.post("/curricula/full/results", json=_results(acknowledged[20:]))
+    _refused(refused_results, "database or disk is full")
+
+    assert http.get(f"{service.url}/healthz").status_code == 200
+    assert http.get("/curricula/full").json()["counters"]["results_received"] == 20
+
+    service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+    assert len(_draw(http, "full", 1024).json()["tasks"]) == 1024
+    retried = http.post("/curricula/full/results", json=_results(acknowledged[20:])).json()
+    assert retried == {"accepted": 980, "duplicates": 0}, "the refused results were not kept as outstanding"
+
+    assert _stored_results(service.store.path, "full") == {task["task_id"] for task in acknowledged}
+
+
+@pytest.mark.parametrize(
+    ("prefix", "failure"),
+    [
+        ("COMMIT", RuntimeError("injected at commit")),
+        ("BEGIN", MemoryError("injected at begin")),
+        ("INSERT INTO results", ValueError("injected in a write")),
+    ],
+)
+def test_an_exception_that_is_not_sqlites_fails_the_writes_and_the_next_ones_work(
+    service: InProcessService,
+    http: httpx.Client,
+    kuka_space: list[dict[str, Any]],
+    prefix: str,
+    failure: BaseException,
+) -> None:
+    _create(http, "odd", kuka_space)
+    tasks = _draw(http, "odd", 10).json()["tasks"]
+    database = service.store._db
+    service.on_loop(lambda: setattr(service.store, "_db", FailingConnection(database, prefix, failure)))
+
+    _refused(http.post("/curricula/odd/results", json=_results(tasks)), f"{type(failure).__name__}: {failure}")
+    assert http.get(f"{service.url}/healthz").status_code == 200
+
+    assert http.post("/curricula/odd/results", json=_results(tasks)).json() == {"accepted": 10, "duplicates": 0}
+    assert len(_draw(http, "odd", 5).json()["tasks"]) == 5
+    assert _stored_results(service.store.path, "odd") == {task["task_id"] for task in tasks}
+
+
+def test_every_write_of_a_failed_group_is_answered(service: InProcessService, kuka_space: list[dict[str, Any]]) -> None:
+    """Writes that arrive together share one commit; when it fails, each of them gets its 503."""
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=ANSWER_WITHIN_S) as setup:
+        names = [f"group-{i}" for i in range(8)]
+        for name in names:
+            _create(setup, name, kuka_space)
+    database = service.store._db
+    service.on_loop(lambda: setattr(service.store, "_db", FailingConnection(database, "COMMIT", OSError("i/o"))))
+
+    def draw(name: str) -> int:
+        with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=ANSWER_WITHIN_S) as client:
+            return _draw(client, name, 1).status_code
+
+    with ThreadPoolExecutor(len(names)) as pool:
+        statuses = list(pool.map(draw, names))
+    assert 503 in statuses, "the injected failure never met a write"
+    assert set(statuses) <= {200, 503}
+    with httpx.Client(base_url=f"{service.url}/api/v1", headers=headers, timeout=ANSWER_WITHIN_S) as after:
+        assert all(_draw(after, name, 1).status_code == 200 for name in names)
+
+
+def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_room(
+    service: InProcessService, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="common.teacher_client")
+    with TeacherClient(service.url, "client", token=TOKEN, prefetch=1000, backoff=Backoff(0.01, 0.2)) as client:
+        client.register("random", KUKA_TASK_SPACE)
+        assignments = [client.next_task() for _ in range(1000)]
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))
+        for assignment in assignments:
+            client.report(assignment, reward=1.0)
+        assert not client.flush(timeout=2.0)
+        assert client.pending == 1000 and client.delivered == 0
+        assert "HTTP 503: the teacher's database could not store this request: database or disk is full" in caplog.text
+
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+        assert client.flush(timeout=30)
+        assert client.delivered == 1000
+    assert _stored_results(service.store.path, "client") == {a.task_id for a in assignments}
