@@ -162,7 +162,9 @@ def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is
     service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
     assert len(_draw(http, "full", 1024).json()["tasks"]) == 1024
     retried = http.post("/curricula/full/results", json=_results(acknowledged[20:])).json()
-    assert retried == {"accepted": 980, "duplicates": 0}, "the refused results were not kept as outstanding"
+    assert retried == {"accepted": 980, "duplicates": 0, "expired": 0}, (
+        "the refused results were not kept as outstanding"
+    )
 
     assert _stored_results(service.store.path, "full") == {task["task_id"] for task in acknowledged}
 
@@ -190,7 +192,11 @@ def test_an_exception_that_is_not_sqlites_fails_the_writes_and_the_next_ones_wor
     _refused(http.post("/curricula/odd/results", json=_results(tasks)), f"{type(failure).__name__}: {failure}")
     assert http.get(f"{service.url}/healthz").status_code == 200
 
-    assert http.post("/curricula/odd/results", json=_results(tasks)).json() == {"accepted": 10, "duplicates": 0}
+    assert http.post("/curricula/odd/results", json=_results(tasks)).json() == {
+        "accepted": 10,
+        "duplicates": 0,
+        "expired": 0,
+    }
     assert len(_draw(http, "odd", 5).json()["tasks"]) == 5
     assert _stored_results(service.store.path, "odd") == {task["task_id"] for task in tasks}
 
