@@ -18,6 +18,8 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
     "random": {},
     "fixed": {},
+    "adr": {"queue_length": 3, "reward_range": [-1.0, 1.0]},
+    "self-paced": {"update_every": 20, "reward_range": [-1.0, 1.0]},
 }
 
 
