@@ -43,6 +43,10 @@ from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange,
 RECENT_MOVES = 200
 """Boundary moves kept in the state (the oldest are dropped; the totals count them all)."""
 
+SNAP = 1e-9
+"""A bound that ends this close to its limit (in widths of its parameter) is put on it: sums of
+0.1 steps fall short of 1 by rounding."""
+
 Side = Literal["low", "high"]
 SIDES: tuple[Side, Side] = ("low", "high")
 
@@ -150,23 +154,21 @@ class AdrTeacher(Teacher):
     def _move(self, d: int, side: Side, outward: bool, mean: float) -> None:
         """Move one bound by ``step`` of its width: outward up to the space's limit, inward down
         to the starting box."""
-        step = self.params.step * (self.space.high[d] - self.space.low[d])
+        width = self.space.high[d] - self.space.low[d]
+        current = self.low[d] if side == "low" else self.high[d]
+        if outward:
+            limit = self.space.low[d] if side == "low" else self.space.high[d]
+        else:
+            limit = self.initial_low[d] if side == "low" else self.initial_high[d]
+        moved = current + (self.params.step * width if (side == "high") == outward else -self.params.step * width)
+        if (moved - limit) * (limit - current) >= 0 or abs(moved - limit) <= SNAP * width:
+            moved = limit  # stepped past the limit, or short of it by rounding (ten steps of 0.1)
+        if moved == current:
+            return
         before = self.bounds()
         if side == "low":
-            moved = (
-                max(self.low[d] - step, self.space.low[d]) if outward else min(self.low[d] + step, self.initial_low[d])
-            )
-            if moved == self.low[d]:
-                return
             self.low[d] = moved
         else:
-            moved = (
-                min(self.high[d] + step, self.space.high[d])
-                if outward
-                else max(self.high[d] - step, self.initial_high[d])
-            )
-            if moved == self.high[d]:
-                return
             self.high[d] = moved
         if outward:
             self.widened += 1

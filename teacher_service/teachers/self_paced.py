@@ -62,6 +62,9 @@ MAX_SPREAD = 1.0
 MAX_ITERATIONS = 100
 """SLSQP iterations per update: bounds its cost (a few milliseconds for the sizes allowed)."""
 
+AT_TARGET = 1e-9
+"""KL divergence to the target below which the Gaussian has arrived and stays."""
+
 KL_TOLERANCE = 1e-6
 """Relative overshoot of the KL limit accepted from the optimiser."""
 
@@ -214,6 +217,8 @@ def update_gaussian(
 
     if now >= bar:
         start_kl = problem.to_target(np.zeros(2 * len(old.mean)))[0]
+        if start_kl <= AT_TARGET:
+            return Step(old, "at the target", now, now, 0.0)
 
         def to_target(x: np.ndarray) -> tuple[float, np.ndarray]:
             """Scaled to start at 1, which suits SLSQP's tolerances whatever the distance."""

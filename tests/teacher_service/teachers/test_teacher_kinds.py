@@ -117,7 +117,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
     original = build(kind)
     run_student(original, 130, batch=7)
     original.sample(5)  # handed out, no result yet
-    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1)}
+    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1), "adr": ("widened", 3), "self-paced": ("updates", 3)}
     if kind in learned:
         entry, least = learned[kind]
         assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"
