@@ -11,9 +11,11 @@ from typing import Any
 import numpy as np
 import pytest
 from reach_student import SQUARE, ReachStudent, practise
+from scipy.special import ndtri
 
 from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
+from teacher_service.teachers.self_paced import Gaussian, update_gaussian
 
 KL_LIMIT = 0.1
 
@@ -72,6 +74,8 @@ def test_holds_a_stuck_student_near_the_bar_and_never_steps_toward_the_target_be
     assert state["kl_to_target"] > 100, "far from the target (a student that keeps up arrives: see above)"
     assert np.mean(successes[-1000:]) >= 0.2, "the student keeps succeeding about as often as the bar asks"
     moves = state["moves"]
+    toward = [move for move in moves if move["why"] == "toward the target"]
+    assert all(move["expected_performance_after"] >= 0.25 for move in toward), "the bar holds every step"
     below = [i for i, move in enumerate(moves) if move["why"] == "below the bar: toward better performance"]
     assert len(below) >= 3, "the Gaussian reaches past the student's reach and comes back"
     for i in below:
@@ -79,6 +83,19 @@ def test_holds_a_stuck_student_near_the_bar_and_never_steps_toward_the_target_be
         assert moves[i]["expected_performance_after"] > moves[i]["expected_performance"]
         assert moves[i]["kl"] <= KL_LIMIT * (1 + 1e-6)
         assert moves[i]["kl_to_target"] > moves[i - 1]["kl_to_target"], "below the bar it steps away"
+
+
+def test_the_bar_limits_a_step_that_the_kl_limit_would_allow() -> None:
+    old = Gaussian(np.array([0.25]), np.log(np.array([0.1])))
+    target = Gaussian(np.array([1.0]), np.log(np.array([0.05])))
+    points = np.clip(old.mean + 0.1 * ndtri((np.arange(200) + 0.5) / 200), 0.0, 1.0)[:, np.newaxis]
+    scores = (points[:, 0] <= 0.3).astype(float)
+    free = update_gaussian(old, target, points, scores, bar=0.0, kl_limit=0.5)
+    assert free.kl_step == pytest.approx(0.5, rel=1e-3), "with no bar the KL limit binds"
+    barred = update_gaussian(old, target, points, scores, bar=0.55, kl_limit=0.5)
+    assert barred.why == "toward the target" and barred.expected_before > 0.55
+    assert barred.expected_after == pytest.approx(0.55, abs=1e-3), "the bar binds"
+    assert old.mean[0] < barred.gaussian.mean[0] < free.gaussian.mean[0]
 
 
 def test_stays_put_when_the_student_fails_everywhere() -> None:
