@@ -28,8 +28,11 @@ overshoots the KL limit is pulled back along its line. TeachMyAgent's benchmark 
 (there the weight of a KL penalty, SPDL's alpha schedule) and a KL limit of 0.1; both are the
 defaults here, zeta as the performance bar.
 
-The optimisation takes a few milliseconds (about 3 ms for 6 parameters and 100 results on the
-development machine), so it runs inline, every ``update_every`` results.
+The update takes milliseconds of CPU (bench/self_paced_update_time.py on the shared development
+machine: 3-5 ms for 6 parameters and 100-250 results, at most 15 ms for 64 parameters and 1,000
+results, the largest allowed), so it runs inline every ``update_every`` results rather than as a
+FitJob; SLSQP's linear algebra runs on one BLAS thread, without which a busy machine made it 10-30
+times slower.
 
 When it helps: when the hard target is known and the way there is a smooth path from easy tasks,
 so that a single moving blob of tasks can follow the student (TeachMyAgent ranks it best with its
@@ -38,6 +41,7 @@ climber body and middling elsewhere). It is not for targets spread over disconne
 
 from __future__ import annotations
 
+import functools
 import statistics
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -48,6 +52,7 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy.optimize import Bounds, NonlinearConstraint, minimize
 from scipy.special import ndtri
+from threadpoolctl import ThreadpoolController
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
@@ -249,9 +254,17 @@ def _constraint(function: ValueAndGradient, low: float, high: float) -> Nonlinea
     )
 
 
+@functools.cache
+def _blas_threads() -> ThreadpoolController:
+    """The loaded BLAS libraries, found once: finding them takes milliseconds."""
+    return ThreadpoolController()
+
+
 def _solve(objective: ValueAndGradient, bounds: Bounds, constraints: list[NonlinearConstraint]) -> np.ndarray:
-    """SLSQP from the old Gaussian (the origin of the scaled coordinates)."""
-    with np.errstate(over="ignore", under="ignore"):
+    """SLSQP from the old Gaussian (the origin of the scaled coordinates), on one BLAS thread: its
+    linear algebra is small, and threads waiting for cores on a busy machine made it 10-30 times
+    slower."""
+    with np.errstate(over="ignore", under="ignore"), _blas_threads().limit(limits=1, user_api="blas"):
         result = minimize(
             objective,
             np.zeros(len(bounds.lb)),
