@@ -20,11 +20,13 @@ Differences from the authors' code (psclklnk/currot's ``SelfPacedTeacherV2``) an
 SPDL: the covariance is diagonal (2d numbers to optimise rather than d + d(d+1)/2; a full one
 needs more results per update than a curriculum service gets); the KL divergences are exact
 (closed form between Gaussians) rather than sampled; importance weights are self-normalised, so
-the estimate stays a mean of observed performances; the performance is success or a scaled
+the estimate stays a mean of observed performances (the proposal is taken to be the current
+Gaussian, though in a live service some of those tasks were drawn before the last update, and
+clipped tasks are weighted where they landed); the performance is success or a scaled
 return rather than a value function's estimate, and the bar is on that [0, 1] scale; below the
 bar it always climbs performance (the authors do so only until the bar is first reached, then
-keep the old distribution); the optimiser is SLSQP with exact gradients, and a step that
-overshoots the KL limit is pulled back along its line. TeachMyAgent's benchmark used zeta 0.25
+keep the old distribution); the optimiser is SLSQP with exact gradients, and a step that ends
+outside its constraints is pulled back along its line. TeachMyAgent's benchmark used zeta 0.25
 (there the weight of a KL penalty, SPDL's alpha schedule) and a KL limit of 0.1; both are the
 defaults here, zeta as the performance bar.
 
@@ -35,8 +37,10 @@ FitJob; SLSQP's linear algebra runs on one BLAS thread, without which a busy mac
 times slower.
 
 When it helps: when the hard target is known and the way there is a smooth path from easy tasks,
-so that a single moving blob of tasks can follow the student (TeachMyAgent ranks it best with its
-climber body and middling elsewhere). It is not for targets spread over disconnected regions.
+so that a single moving blob of tasks can follow the student (on TeachMyAgent's Parkour it is the
+best teacher with the climber body and below random with the default walker). It is not for
+targets spread over disconnected regions, and with the default KL limit a narrow Gaussian moves
+slowly: about a tenth of its spread per update and parameter.
 """
 
 from __future__ import annotations
