@@ -288,7 +288,10 @@ def _step(problem: _Problem, x: np.ndarray, why: str, now: float) -> Step:
 
 def _pull_back(found: np.ndarray, acceptable: Callable[[np.ndarray], bool]) -> np.ndarray:
     """``found``, or when it is not ``acceptable`` (SLSQP may end a little outside its constraints)
-    the farthest acceptable point found by bisection on the line from the old Gaussian to it."""
+    the farthest acceptable point found by bisection on the line from the old Gaussian to it; the
+    old Gaussian when the optimiser failed outright."""
+    if not np.isfinite(found).all():
+        return np.zeros_like(found)
     if acceptable(found):
         return found
     near, far = 0.0, 1.0

@@ -15,7 +15,7 @@ from scipy.special import ndtri
 
 from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
-from teacher_service.teachers.self_paced import Gaussian, update_gaussian
+from teacher_service.teachers.self_paced import Gaussian, _pull_back, update_gaussian
 
 KL_LIMIT = 0.1
 
@@ -96,6 +96,13 @@ def test_the_bar_limits_a_step_that_the_kl_limit_would_allow() -> None:
     assert barred.why == "toward the target" and barred.expected_before > 0.55
     assert barred.expected_after == pytest.approx(0.55, abs=1e-3), "the bar binds"
     assert old.mean[0] < barred.gaussian.mean[0] < free.gaussian.mean[0]
+
+
+def test_an_optimiser_step_outside_the_constraints_is_pulled_back_or_dropped() -> None:
+    assert _pull_back(np.array([0.5, -0.5]), lambda x: True).tolist() == [0.5, -0.5]
+    assert _pull_back(np.array([2.0, 4.0]), lambda x: x[0] <= 1.0) == pytest.approx([1.0, 2.0], abs=1e-6)
+    assert _pull_back(np.array([np.nan, 1.0]), lambda x: True).tolist() == [0.0, 0.0]
+    assert _pull_back(np.array([1.0, 1.0]), lambda x: False).tolist() == [0.0, 0.0]
 
 
 def test_stays_put_when_the_student_fails_everywhere() -> None:

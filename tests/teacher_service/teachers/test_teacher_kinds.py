@@ -74,7 +74,7 @@ def test_batching_does_not_change_the_tasks(kind: str) -> None:
     assert at_once.sample(30) == in_pieces.sample(1) + in_pieces.sample(12) + in_pieces.sample(17)
 
 
-@pytest.mark.parametrize("kind", ["alp-gmm", "random"])
+@pytest.mark.parametrize("kind", ["alp-gmm", "random", "adr", "self-paced"])
 def test_the_seed_matters(kind: str) -> None:
     assert run_student(build(kind, seed=3), 100) != run_student(build(kind, seed=4), 100)
 
