@@ -41,7 +41,8 @@ from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
 from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
 
 RECENT_MOVES = 200
-"""Boundary moves kept in the state (the oldest are dropped; the totals count them all)."""
+"""Boundary moves kept in the state (the oldest are dropped; the totals count them all). A move's
+``from`` and ``to`` hold only the parameter that moved, so the state stays small in large spaces."""
 
 SNAP = 1e-9
 """A bound that ends this close to its limit (in widths of its parameter) is put on it: sums of
@@ -165,7 +166,6 @@ class AdrTeacher(Teacher):
             moved = limit  # stepped past the limit, or short of it by rounding (ten steps of 0.1)
         if moved == current:
             return
-        before = self.bounds()
         if side == "low":
             self.low[d] = moved
         else:
@@ -180,8 +180,8 @@ class AdrTeacher(Teacher):
                 "at_results": self.results_seen,
                 "parameter": self.space.names[d],
                 "side": side,
-                "from": before,
-                "to": self.bounds(),
+                "from": {self.space.names[d]: float(current)},
+                "to": {self.space.names[d]: float(moved)},
                 "performance": mean,
                 "why": (
                     f"{'widened' if outward else 'narrowed'}: mean performance {mean:.3g} over "

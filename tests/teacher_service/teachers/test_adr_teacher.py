@@ -47,8 +47,8 @@ def test_a_mastering_student_widens_the_box_to_the_hardest_task() -> None:
     assert state["bounds"]["high"] == SQUARE.hardest()
     assert state["widened"] - state["narrowed"] == 20, "ten steps of 0.1 for each of the two high bounds"
     for move in state["moves"]:
-        before = move["from"][move["side"]][move["parameter"]]
-        after = move["to"][move["side"]][move["parameter"]]
+        before = move["from"][move["parameter"]]
+        after = move["to"][move["parameter"]]
         width = 1.0 if move["parameter"] == "x" else 4.0
         assert abs(after - before) == pytest.approx(0.1 * width) or after in (1.0, 2.0)
         assert move["why"].startswith("widened" if after > before else "narrowed")
@@ -66,7 +66,9 @@ def test_a_stuck_student_holds_the_box_near_its_reach_by_narrowing() -> None:
     assert 0.3 <= highest <= 0.4 + 1e-9, "a bound past the reach fails and steps back"
     narrowed = [move for move in state["moves"] if move["why"].startswith("narrowed")]
     assert all(move["performance"] <= 0.2 for move in narrowed)
-    assert all(move["to"]["high"][move["parameter"]] < move["from"]["high"][move["parameter"]] for move in narrowed)
+    assert all(
+        move["side"] == "high" and move["to"][move["parameter"]] < move["from"][move["parameter"]] for move in narrowed
+    )
 
 
 def test_never_narrows_past_the_start() -> None:
