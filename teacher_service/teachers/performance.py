@@ -3,8 +3,9 @@
 ADR and SPDL compare the student's results with thresholds. A result that says whether the episode
 succeeded counts 1 or 0, so a mean is a success rate; a result without ``success`` counts its
 return mapped linearly from ``reward_range`` onto [0, 1] (clipped), so a mean compares the return
-with the same thresholds. The KUKA default range [0, 10] maps a grasp (about +10) to 1 and a
-failed episode (about -2..+2) to 0..0.2, so both readings of the same run give close means.
+with the same thresholds. The KUKA default range [0, 10] maps a grasp (about +9 to +10) to about
+1 and a failed episode (about -3 to +2) to 0..0.2, so both readings of a run give close means.
+The KUKA learner reports success with every result, so there the thresholds are on success rates.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ REWARD_LIMIT = 1e9
 """Largest magnitude of a ``reward_range`` end: beyond any real return, and keeps the range finite."""
 
 KUKA_REWARD_RANGE = [0.0, 10.0]
-"""The default ``reward_range``: a KUKA grasp returns about +10, a failed episode about -2..+2."""
+"""The default ``reward_range``: a KUKA grasp returns about +9 to +10, a failed episode about -3 to +2."""
 
 RewardRange = Annotated[
     list[Annotated[float, Field(ge=-REWARD_LIMIT, le=REWARD_LIMIT, allow_inf_nan=False)]],
