@@ -15,8 +15,10 @@ from pydantic import Field, TypeAdapter, ValidationError
 
 from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
+from teacher_service.teachers.adr import AdrParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
 from teacher_service.teachers.manual import ManualParams
+from teacher_service.teachers.self_paced import SelfPacedParams
 from teacher_service.teachers.uniform import FixedParams, RandomParams
 
 log = logging.getLogger(__name__)
@@ -53,14 +55,32 @@ class FixedCurriculum(TypedSpec):
     params: FixedParams = Field(default_factory=FixedParams)
 
 
+class AdrCurriculum(TypedSpec):
+    teacher: Literal["adr"]
+    params: AdrParams = Field(default_factory=AdrParams)
+
+
+class SelfPacedCurriculum(TypedSpec):
+    teacher: Literal["self-paced"]
+    params: SelfPacedParams = Field(default_factory=SelfPacedParams)
+
+
 CurriculumRequest = Annotated[
-    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum, Field(discriminator="teacher")
+    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum | AdrCurriculum | SelfPacedCurriculum,
+    Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
 
 SPEC_CLASSES: dict[str, type[TypedSpec]] = {
     get_args(spec.model_fields["teacher"].annotation)[0]: spec
-    for spec in (AlpGmmCurriculum, ManualCurriculum, RandomCurriculum, FixedCurriculum)
+    for spec in (
+        AlpGmmCurriculum,
+        ManualCurriculum,
+        RandomCurriculum,
+        FixedCurriculum,
+        AdrCurriculum,
+        SelfPacedCurriculum,
+    )
 }
 
 _ADAPTER: TypeAdapter[CurriculumRequest] = TypeAdapter(CurriculumRequest)

@@ -18,6 +18,8 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
     "random": {},
     "fixed": {},
+    "adr": {"queue_length": 3, "reward_range": [-1.0, 1.0]},
+    "self-paced": {"update_every": 20, "reward_range": [-1.0, 1.0]},
 }
 
 
@@ -72,7 +74,7 @@ def test_batching_does_not_change_the_tasks(kind: str) -> None:
     assert at_once.sample(30) == in_pieces.sample(1) + in_pieces.sample(12) + in_pieces.sample(17)
 
 
-@pytest.mark.parametrize("kind", ["alp-gmm", "random"])
+@pytest.mark.parametrize("kind", ["alp-gmm", "random", "adr", "self-paced"])
 def test_the_seed_matters(kind: str) -> None:
     assert run_student(build(kind, seed=3), 100) != run_student(build(kind, seed=4), 100)
 
@@ -115,7 +117,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
     original = build(kind)
     run_student(original, 130, batch=7)
     original.sample(5)  # handed out, no result yet
-    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1)}
+    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1), "adr": ("widened", 3), "self-paced": ("updates", 3)}
     if kind in learned:
         entry, least = learned[kind]
         assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"

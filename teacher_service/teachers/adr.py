@@ -1,0 +1,241 @@
+"""ADR, Automatic Domain Randomization (OpenAI et al. 2019, "Solving Rubik's Cube with a Robot Hand").
+
+The teacher keeps a box of task bounds that starts at the easiest task (a point, or a small box
+around it) and grows toward the whole space while the student copes with its edges. A task is,
+with probability ``boundary_prob``, pinned at one open boundary (a low or high bound not yet at
+the space's limit) with the other parameters uniform in the box; otherwise it is uniform in the
+box. Every result whose task lies on a boundary is queued for that boundary (exact equality, as
+the tasks handed out carry the bound's exact value; a parameter whose bounds still coincide puts
+every result on both). When a queue holds ``queue_length`` results, their mean performance
+(``performance.py``: success rate, or the return scaled by ``reward_range``) at or above
+``upper_threshold`` moves that bound ``step`` of the parameter's width outward, at or below
+``lower_threshold`` moves it back inward; then the queue is emptied.
+
+Differences from TeachMyAgent's ADR (Romac et al. 2021), whose benchmark settings (boundary
+probability 0.7, step 0.1 of the width, queues of 10) are the defaults here: thresholds are on
+the [0, 1] performance scale rather than raw return; a pinned boundary is chosen uniformly among
+the open ones rather than a parameter first and then one of its ends; and a bound never narrows
+past the starting box (TeachMyAgent lets it move until it meets the opposite bound), so the box
+always holds the easiest task.
+
+When it helps: when the easiest task is known and difficulty grows outward from it along each
+parameter, so that mastering the edge of what is mastered is the way forward. It is slow where
+most of the space is infeasible (TeachMyAgent's Parkour ranks it last) and needs thresholds that
+fit the student's returns.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from collections.abc import Mapping
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from common.task_space import Task, TaskSpace
+from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
+from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
+from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
+
+RECENT_MOVES = 200
+"""Boundary moves kept in the state (the oldest are dropped; the totals count them all). A move's
+``from`` and ``to`` hold only the parameter that moved, so the state stays small in large spaces."""
+
+SNAP = 1e-9
+"""A bound that ends this close to its limit (in widths of its parameter) is put on it: sums of
+0.1 steps fall short of 1 by rounding."""
+
+Side = Literal["low", "high"]
+SIDES: tuple[Side, Side] = ("low", "high")
+
+
+class AdrParams(TeacherParams):
+    start: TaskParam | None = None
+    """Centre of the starting box; null starts at the space's easiest point."""
+    initial_width: float = Field(default=0.0, ge=0.0, le=1.0)
+    """Width of the starting box per parameter, as a share of the parameter's range (clipped to the
+    space); 0 starts from the single point, as the paper does."""
+    boundary_prob: float = Field(default=0.7, ge=0.0, le=1.0)
+    """Share of tasks pinned at an open boundary (TeachMyAgent's benchmark used 0.7)."""
+    step: float = Field(default=0.1, gt=0.0, le=1.0)
+    """How far a bound moves, as a share of its parameter's range (TeachMyAgent: 0.1)."""
+    queue_length: int = Field(default=10, ge=1, le=1000)
+    """Results at a boundary that decide whether it moves (TeachMyAgent: 10)."""
+    upper_threshold: float = Field(default=0.8, ge=0.0, le=1.0)
+    """Widen a boundary when its queue's mean performance is at least this."""
+    lower_threshold: float = Field(default=0.2, ge=0.0, le=1.0)
+    """Narrow a boundary when its queue's mean performance is at most this."""
+    reward_range: RewardRange = Field(default_factory=lambda: list(KUKA_REWARD_RANGE))
+    """Returns mapped onto [0, 1] for results without ``success`` (KUKA default: [0, 10])."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> AdrParams:
+        if not self.lower_threshold < self.upper_threshold:
+            raise ValueError(
+                f"lower_threshold ({self.lower_threshold}) must be below upper_threshold ({self.upper_threshold})"
+            )
+        check_reward_range(self.reward_range)
+        return self
+
+
+class AdrTeacher(Teacher):
+    """A box of tasks that widens at boundaries the student masters (see the module docstring)."""
+
+    kind = "adr"
+    Params = AdrParams
+    params: AdrParams
+
+    def __init__(self, space: TaskSpace, seed: int, params: AdrParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
+        if self.params.start is not None:
+            start = space.to_array(in_space("start", self.params.start, space))
+        else:
+            try:
+                start = space.to_array(space.easiest())
+            except ValueError as error:
+                raise ValueError(f"start: none given and {error}") from None
+        half = self.params.initial_width * (space.high - space.low) / 2
+        self.initial_low = np.maximum(start - half, space.low)
+        self.initial_high = np.minimum(start + half, space.high)
+        self.low = self.initial_low.copy()
+        self.high = self.initial_high.copy()
+        self.queues: dict[tuple[int, Side], list[float]] = {(d, side): [] for d in range(len(space)) for side in SIDES}
+        self.moves: deque[dict[str, Any]] = deque(maxlen=RECENT_MOVES)
+        self.widened = 0
+        self.narrowed = 0
+
+    def _open_boundaries(self) -> list[tuple[int, Side]]:
+        """Boundaries not yet at the space's limit, in a fixed order."""
+        open_: list[tuple[int, Side]] = []
+        for d in range(len(self.space)):
+            if self.low[d] > self.space.low[d]:
+                open_.append((d, "low"))
+            if self.high[d] < self.space.high[d]:
+                open_.append((d, "high"))
+        return open_
+
+    def _draw(self, first_index: int, count: int) -> list[Task]:
+        dims = len(self.space)
+        # Per task: the pinning coin, the boundary choice, then one uniform per parameter.
+        uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + dims)
+        tasks = self.low + uniforms[:, 2:] * (self.high - self.low)
+        boundaries = self._open_boundaries()
+        if boundaries:
+            for row, (coin, choice) in enumerate(uniforms[:, :2]):
+                if coin < self.params.boundary_prob:
+                    d, side = boundaries[min(int(choice * len(boundaries)), len(boundaries) - 1)]
+                    tasks[row, d] = self.low[d] if side == "low" else self.high[d]
+        return [self.space.from_array(row) for row in tasks]
+
+    def _learn(self, result: EpisodeResult) -> FitJob | None:
+        task = self.space.to_array(result.task)
+        score = performance(result, self.params.reward_range)
+        for d in range(len(self.space)):
+            if task[d] == self.low[d]:
+                self._queue(d, "low", score)
+            if task[d] == self.high[d]:
+                self._queue(d, "high", score)
+        return None
+
+    def _queue(self, d: int, side: Side, score: float) -> None:
+        queue = self.queues[d, side]
+        queue.append(score)
+        if len(queue) < self.params.queue_length:
+            return
+        mean = statistics.fmean(queue)
+        queue.clear()
+        if mean >= self.params.upper_threshold:
+            self._move(d, side, outward=True, mean=mean)
+        elif mean <= self.params.lower_threshold:
+            self._move(d, side, outward=False, mean=mean)
+
+    def _move(self, d: int, side: Side, outward: bool, mean: float) -> None:
+        """Move one bound by ``step`` of its width: outward up to the space's limit, inward down
+        to the starting box."""
+        width = self.space.high[d] - self.space.low[d]
+        current = self.low[d] if side == "low" else self.high[d]
+        if outward:
+            limit = self.space.low[d] if side == "low" else self.space.high[d]
+        else:
+            limit = self.initial_low[d] if side == "low" else self.initial_high[d]
+        moved = current + (self.params.step * width if (side == "high") == outward else -self.params.step * width)
+        if (moved - limit) * (limit - current) >= 0 or abs(moved - limit) <= SNAP * width:
+            moved = limit  # stepped past the limit, or short of it by rounding (ten steps of 0.1)
+        if moved == current:
+            return
+        if side == "low":
+            self.low[d] = moved
+        else:
+            self.high[d] = moved
+        if outward:
+            self.widened += 1
+        else:
+            self.narrowed += 1
+        threshold = "upper" if outward else "lower"
+        self.moves.append(
+            {
+                "at_results": self.results_seen,
+                "parameter": self.space.names[d],
+                "side": side,
+                "from": {self.space.names[d]: float(current)},
+                "to": {self.space.names[d]: float(moved)},
+                "performance": mean,
+                "why": (
+                    f"{'widened' if outward else 'narrowed'}: mean performance {mean:.3g} over "
+                    f"{self.params.queue_length} results at {self.space.names[d]}'s {side} bound "
+                    f"{'>=' if outward else '<='} {threshold}_threshold"
+                ),
+            }
+        )
+
+    def bounds(self) -> dict[str, Task]:
+        """The current box, in task units."""
+        return {"low": self.space.from_array(self.low), "high": self.space.from_array(self.high)}
+
+    def _describe(self) -> dict[str, Any]:
+        open_ = set(self._open_boundaries())
+        boundaries = []
+        for (d, side), queue in self.queues.items():
+            boundaries.append(
+                {
+                    "parameter": self.space.names[d],
+                    "side": side,
+                    "value": float(self.low[d] if side == "low" else self.high[d]),
+                    "at_limit": (d, side) not in open_,
+                    "queued": len(queue),
+                    "queue_mean": statistics.fmean(queue) if queue else None,
+                }
+            )
+        return {
+            "bounds": {**self.bounds(), "boundaries": boundaries},
+            "moves": list(self.moves),
+            "widened": self.widened,
+            "narrowed": self.narrowed,
+            "full_space": not open_,
+        }
+
+    def _export(self) -> dict[str, Any]:
+        return {
+            "low": self.low.tolist(),
+            "high": self.high.tolist(),
+            "queues": [[self.space.names[d], side, list(queue)] for (d, side), queue in self.queues.items()],
+            "moves": list(self.moves),
+            "widened": self.widened,
+            "narrowed": self.narrowed,
+        }
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        low = np.array(state["low"], dtype=np.float64)
+        high = np.array(state["high"], dtype=np.float64)
+        if low.shape != (len(self.space),) or high.shape != low.shape:
+            raise ValueError(f"bounds must have {len(self.space)} values each, got {low.shape} and {high.shape}")
+        self.low, self.high = low, high
+        index = {name: d for d, name in enumerate(self.space.names)}
+        for name, side, queue in state["queues"]:
+            self.queues[index[name], side] = [float(score) for score in queue]
+        self.moves.extend(state["moves"])
+        self.widened = int(state["widened"])
+        self.narrowed = int(state["narrowed"])
