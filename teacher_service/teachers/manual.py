@@ -174,8 +174,9 @@ class ManualTeacher(Teacher):
         params, space = self.params, self.space
         if params.lessons is not None:
             return [in_space(f"lessons[{index}]", lesson, space) for index, lesson in enumerate(params.lessons)]
+        start = None if params.start is None else in_space("start", params.start, space)
         try:
-            start = space.easiest() if params.start is None else in_space("start", params.start, space)
+            start = space.easiest() if start is None else start
             hardest = space.hardest()
         except ValueError as error:
             raise ValueError(f"{error}: a computed lesson plan needs the anchors, or give lessons") from None

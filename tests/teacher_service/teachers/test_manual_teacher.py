@@ -194,6 +194,10 @@ def test_the_success_rate_can_decide_and_results_without_it_are_left_out() -> No
         ({"threshold": 1.0, "step_back_below": 1.0}, "must be below threshold"),
         ({"lessons": [{"gravity": 20.0, "mass": 0.5}]}, r"lessons\[0\]: task parameter 'gravity'=20.0 is outside"),
         ({"start": DIFFICULTY.hardest()}, "lessons 0 and 1 of the plan are the same task"),
+        (
+            {"start": {"gravity": 1.0, "mass": 0.5}},
+            r"^start: task parameter 'gravity'=1.0 is outside its bounds \[2.0, 12.0\]$",
+        ),
         ({"steps": 1001}, "less than or equal to 1000"),
     ],
 )
