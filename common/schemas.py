@@ -178,3 +178,29 @@ class Health(BaseModel):
 
 class ErrorMessage(BaseModel):
     detail: str
+
+
+class TeacherParameterInfo(BaseModel):
+    """One parameter of a teacher kind, as its parameter model declares it."""
+
+    name: str
+    type: str = Field(description="JSON type(s), e.g. 'integer' or 'number | null'.")
+    default: Any = Field(description="Used when the parameter is left out.")
+    doc: str = Field(description="What the parameter does.")
+    minimum: float | None = Field(description="Smallest value allowed (inclusive), if bounded below.")
+    maximum: float | None = Field(description="Largest value allowed (inclusive), if bounded above.")
+    exclusive_minimum: float | None = Field(description="Values must exceed this, if bounded so.")
+    exclusive_maximum: float | None = Field(description="Values must stay below this, if bounded so.")
+    max_items: int | None = Field(description="Most items of a list or entries of a mapping, if bounded.")
+    choices: list[Any] | None = Field(description="The values allowed, for a choice among names.")
+    json_schema: dict[str, Any] = Field(description="The parameter's full JSON schema.")
+
+
+class TeacherKindInfo(BaseModel):
+    kind: str = Field(description="The `teacher` of a curriculum request.")
+    summary: str = Field(description="What the teacher does, in one line.")
+    parameters: list[TeacherParameterInfo] = Field(description="Its `params`, in declaration order.")
+
+
+class TeacherKindList(BaseModel):
+    teachers: list[TeacherKindInfo]

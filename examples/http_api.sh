@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The teacher service's HTTP API from the shell, with curl (and jq to read the answers):
-# register a curriculum, take tasks, post their results, read the teacher's state.
+# list the teacher kinds, register a curriculum, take tasks, post their results, read the teacher's state.
 #
 #   .venv/bin/kuka-curriculum serve --port 8000 &
 #   bash examples/http_api.sh [TEACHER_URL [CURRICULUM]]
@@ -28,6 +28,9 @@ call() {
 }
 
 echo "watch the curriculum at $url/curricula/$curriculum"
+
+echo "0. the teacher kinds on offer (GET /api/v1/teachers also lists each one's parameters and bounds)"
+call "$url/api/v1/teachers" | jq -r '.teachers[] | "  \(.kind): \(.summary)"'
 
 echo "1. register: ALP-GMM over a two-parameter task space (201 created, 200 if it already exists)"
 call -X PUT "$api" -d '{

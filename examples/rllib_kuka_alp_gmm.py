@@ -1,5 +1,5 @@
-"""RLlib PPO on KukaGrasp-v0 with several env runners, each episode's task chosen by ALP-GMM on the
-teacher service.
+"""RLlib PPO on KukaGrasp-v0 with several env runners, each episode's task chosen by ALP-GMM (or
+--teacher) on the teacher service.
 
 Start a teacher, then train (the dashboard URL is printed first):
 
@@ -10,7 +10,8 @@ Every env runner is a Ray actor that makes its environments with ``make_env``; t
 one makes its own teacher client, and when RLlib stops its env runners, closing their environments
 delivers the last results. ``--ray-address`` joins a running Ray cluster instead of starting one.
 When the service requires a token (``KC_TEACHER_TOKEN``), export the same variable here: the job's
-``runtime_env`` passes it on to the env runners.
+``runtime_env`` passes it on to the env runners. ``--teacher`` picks any kind the service offers
+and ``--teacher-param NAME=VALUE`` sets one of its parameters on top of the KUKA defaults.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from typing import Any
+from typing import Any, cast
 
 import gymnasium
 import ray
@@ -33,31 +34,43 @@ from ray.tune.registry import register_env
 
 from common import ENV_ID
 from common.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
+from common.schemas import TeacherKind
 from common.task_space import KUKA_TASK_SPACE
 from common.teacher_client import TeacherClient
+from learner.arguments import add_teacher_flags
 from learner.config import KUKA_TEACHER_PARAMS
 
 ENV_NAME = "kuka-grasp-curriculum"
-ALP_GMM = CurriculumRegistration("alp-gmm", KUKA_TASK_SPACE, params=KUKA_TEACHER_PARAMS["alp-gmm"])
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--teacher-url", default="http://127.0.0.1:8000", help="a running `kuka-curriculum serve`")
-    parser.add_argument("--curriculum", default="kuka-rllib-alp-gmm", help="created on first use")
+    parser.add_argument("--curriculum", help="created on first use (default: kuka-rllib-TEACHER)")
+    add_teacher_flags(parser)
     parser.add_argument("--total-steps", type=int, default=500_000, help="environment steps, all env runners together")
     parser.add_argument("--env-runners", type=int, default=2, help="Ray actors sampling in parallel")
     parser.add_argument("--batch-steps", type=int, default=4000, help="environment steps per PPO update")
     parser.add_argument("--max-episode-steps", type=int, default=1000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--ray-address", help="a running Ray cluster (default: start a local one)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.curriculum = args.curriculum or f"kuka-rllib-{args.teacher}"
+    return args
+
+
+def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRegistration:
+    """The curriculum to create if it does not exist: the kind over the KUKA space, with the
+    training CLI's KUKA defaults (``KUKA_TEACHER_PARAMS``) under the overrides."""
+    params = {**KUKA_TEACHER_PARAMS.get(teacher, {}), **dict(overrides)}
+    return CurriculumRegistration(cast(TeacherKind, teacher), KUKA_TASK_SPACE, params=params)
 
 
 def make_env(config: dict[str, Any]) -> gymnasium.Env:
     """Called by RLlib in each env runner with the ``env_config`` below."""
     kuka = gymnasium.make(ENV_ID, max_steps=config["max_episode_steps"])
-    return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=ALP_GMM)
+    register = registration(config["teacher"], config["teacher_params"])
+    return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=register)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -74,6 +87,8 @@ def main(argv: list[str] | None = None) -> None:
     env_config = {
         "teacher_url": args.teacher_url,
         "curriculum": args.curriculum,
+        "teacher": args.teacher,
+        "teacher_params": args.teacher_params,
         "max_episode_steps": args.max_episode_steps,
     }
     config = (

@@ -1,9 +1,13 @@
-"""Stable-Baselines3 PPO on KukaGrasp-v0, each episode's task chosen by ALP-GMM on the teacher service.
+"""Stable-Baselines3 PPO on KukaGrasp-v0, each episode's task chosen by ALP-GMM (or --teacher) on the teacher service.
 
 Start a teacher, then train (the dashboard URL is printed first):
 
     .venv/bin/kuka-curriculum serve --port 8000 &
     .venv/bin/python examples/sb3_kuka_alp_gmm.py --total-steps 500000
+    .venv/bin/python examples/sb3_kuka_alp_gmm.py --teacher manual --teacher-param step_back_below=0
+
+``--teacher`` picks any kind the service offers and ``--teacher-param NAME=VALUE`` sets one of its
+parameters on top of the KUKA defaults that ``kuka-curriculum train`` uses.
 
 Each SubprocVecEnv worker wraps its environment in ``CurriculumWrapper``, which takes the tasks
 and reports the returns, and in SB3's ``Monitor``, which writes every episode, with its task id, to
@@ -16,6 +20,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import gymnasium
 from stable_baselines3 import PPO
@@ -24,24 +29,35 @@ from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from common import ENV_ID
 from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.schemas import TeacherKind
 from common.task_space import KUKA_TASK_SPACE
 from common.teacher_client import TeacherClient
+from learner.arguments import add_teacher_flags
 from learner.config import KUKA_TEACHER_PARAMS
-
-ALP_GMM = CurriculumRegistration("alp-gmm", KUKA_TASK_SPACE, params=KUKA_TEACHER_PARAMS["alp-gmm"])
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--teacher-url", default="http://127.0.0.1:8000", help="a running `kuka-curriculum serve`")
-    parser.add_argument("--curriculum", default="kuka-sb3-alp-gmm", help="created on first use")
+    parser.add_argument("--curriculum", help="created on first use (default: kuka-sb3-TEACHER)")
+    add_teacher_flags(parser)
     parser.add_argument("--total-steps", type=int, default=500_000, help="environment steps, all envs together")
     parser.add_argument("--envs", type=int, default=2, help="SubprocVecEnv workers, one process each")
     parser.add_argument("--n-steps", type=int, default=1024, help="rollout length per env between PPO updates")
     parser.add_argument("--max-episode-steps", type=int, default=1000)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--log-dir", type=Path, default=Path("runs/sb3-kuka-alp-gmm"), help="Monitor files, model")
-    return parser.parse_args(argv)
+    parser.add_argument("--log-dir", type=Path, help="Monitor files, model (default: runs/sb3-kuka-TEACHER)")
+    args = parser.parse_args(argv)
+    args.curriculum = args.curriculum or f"kuka-sb3-{args.teacher}"
+    args.log_dir = args.log_dir or Path(f"runs/sb3-kuka-{args.teacher}")
+    return args
+
+
+def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRegistration:
+    """The curriculum to create if it does not exist: the kind over the KUKA space, with the
+    training CLI's KUKA defaults (``KUKA_TEACHER_PARAMS``) under the overrides."""
+    params = {**KUKA_TEACHER_PARAMS.get(teacher, {}), **dict(overrides)}
+    return CurriculumRegistration(cast(TeacherKind, teacher), KUKA_TASK_SPACE, params=params)
 
 
 def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]:
@@ -49,7 +65,8 @@ def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]
 
     def make() -> gymnasium.Env:
         kuka = gymnasium.make(ENV_ID, max_steps=args.max_episode_steps)
-        env = CurriculumWrapper(kuka, args.teacher_url, args.curriculum, register=ALP_GMM)
+        register = registration(args.teacher, args.teacher_params)
+        env = CurriculumWrapper(kuka, args.teacher_url, args.curriculum, register=register)
         return Monitor(env, str(args.log_dir / f"env-{rank}"), info_keywords=("task_id",))
 
     return make

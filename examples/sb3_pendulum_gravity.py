@@ -1,4 +1,4 @@
-"""Stable-Baselines3 PPO on gymnasium's Pendulum-v1, with ALP-GMM choosing each episode's gravity and mass.
+"""Stable-Baselines3 PPO on gymnasium's Pendulum-v1, with a curriculum teacher choosing each episode's gravity and mass.
 
 Pendulum knows nothing of tasks: ``apply_pendulum_task`` sets the physics from the task before each
 reset, and the curriculum's own task space (``PENDULUM_TASK_SPACE``) is registered with the service
@@ -6,6 +6,10 @@ over HTTP by the wrapper. Any environment whose parameters can be set from Pytho
 
     .venv/bin/kuka-curriculum serve --port 8000 &
     .venv/bin/python examples/sb3_pendulum_gravity.py --total-steps 200000
+    .venv/bin/python examples/sb3_pendulum_gravity.py --teacher manual --teacher-param step_back_below=-900
+
+``--teacher`` picks any kind the service offers (ALP-GMM by default) and ``--teacher-param`` sets
+one of its parameters on top of ``PENDULUM_TEACHER_PARAMS``.
 
 When the service requires a token (``KC_TEACHER_TOKEN``), export the same variable here.
 """
@@ -15,6 +19,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import gymnasium
 from gymnasium.envs.classic_control.pendulum import PendulumEnv
@@ -23,8 +28,10 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.schemas import TeacherKind
 from common.task_space import Parameter, Task, TaskSpace
 from common.teacher_client import TeacherClient
+from learner.arguments import add_teacher_flags
 
 PENDULUM_TASK_SPACE = TaskSpace(
     [
@@ -35,10 +42,13 @@ PENDULUM_TASK_SPACE = TaskSpace(
 """Light and in low gravity, the pendulum swings up with one push; heavy and in high gravity it must
 be rocked up."""
 
-ALP_GMM = CurriculumRegistration(
-    "alp-gmm", PENDULUM_TASK_SPACE, params={"fit_rate": 100, "reward_range": [-1500.0, 0.0]}
-)
-"""A fit every 100 episodes (20,000 steps); an episode's return lies between about -1,500 and 0."""
+PENDULUM_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
+    "alp-gmm": {"fit_rate": 100, "reward_range": [-1500.0, 0.0]},
+    "manual": {"threshold": -400.0, "window": 20, "min_episodes": 20},
+}
+"""Pendulum's returns lie between about -1,500 and 0: ALP-GMM maps them onto [0, 1] and fits every
+100 episodes (20,000 steps); the lesson plan moves on once 20 episodes average above -400 (a swing-up
+that holds the pendulum upright for most of the episode). Other kinds start from their own defaults."""
 
 
 def apply_pendulum_task(env: gymnasium.Env, task: Task) -> None:
@@ -52,19 +62,29 @@ def apply_pendulum_task(env: gymnasium.Env, task: Task) -> None:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--teacher-url", default="http://127.0.0.1:8000", help="a running `kuka-curriculum serve`")
-    parser.add_argument("--curriculum", default="pendulum-alp-gmm", help="created on first use")
+    parser.add_argument("--curriculum", help="created on first use (default: pendulum-TEACHER)")
+    add_teacher_flags(parser)
     parser.add_argument("--total-steps", type=int, default=200_000)
     parser.add_argument("--envs", type=int, default=4, help="environments in this process (one teacher client)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--log-dir", type=Path, default=Path("runs/sb3-pendulum-alp-gmm"), help="Monitor files, model")
-    return parser.parse_args(argv)
+    parser.add_argument("--log-dir", type=Path, help="Monitor files, model (default: runs/sb3-pendulum-TEACHER)")
+    args = parser.parse_args(argv)
+    args.curriculum = args.curriculum or f"pendulum-{args.teacher}"
+    args.log_dir = args.log_dir or Path(f"runs/sb3-pendulum-{args.teacher}")
+    return args
+
+
+def registration(args: argparse.Namespace) -> CurriculumRegistration:
+    """The curriculum to create if it does not exist: the chosen kind over the pendulum's space."""
+    params = {**PENDULUM_TEACHER_PARAMS.get(args.teacher, {}), **dict(args.teacher_params)}
+    return CurriculumRegistration(cast(TeacherKind, args.teacher), PENDULUM_TASK_SPACE, params=params)
 
 
 def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]:
     def make() -> gymnasium.Env:
         pendulum = gymnasium.make("Pendulum-v1")
         env = CurriculumWrapper(
-            pendulum, args.teacher_url, args.curriculum, register=ALP_GMM, apply_task=apply_pendulum_task
+            pendulum, args.teacher_url, args.curriculum, register=registration(args), apply_task=apply_pendulum_task
         )
         return Monitor(env, str(args.log_dir / f"env-{rank}"), info_keywords=("task_id",))
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Callable
-from typing import Any
+from typing import Any, get_args
+
+from common.schemas import TeacherKind
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:
@@ -55,3 +57,21 @@ def add_override_flags(group: argparse._ArgumentGroup, scope: str) -> None:
             metavar="NAME=VALUE",
             help=f"{what} {scope}, VALUE in JSON; repeatable",
         )
+
+
+def add_teacher_flags(parser: argparse.ArgumentParser) -> None:
+    """``--teacher KIND`` (any kind the service offers; alp-gmm by default) and repeatable
+    ``--teacher-param NAME=VALUE`` (into ``teacher_params``), for the examples' own parsers."""
+    parser.add_argument(
+        "--teacher", default="alp-gmm", choices=get_args(TeacherKind), help="the curriculum's teacher kind"
+    )
+    parser.add_argument(
+        "--teacher-param",
+        dest="teacher_params",
+        action="append",
+        type=setting,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a parameter of the teacher kind, VALUE in JSON, on top of the example's defaults; repeatable "
+        "(GET /api/v1/teachers lists each kind's parameters and bounds)",
+    )

@@ -17,7 +17,7 @@ from fastapi.exceptions import RequestValidationError
 from teacher_service.api.docs import add_offline_docs
 from teacher_service.api.errors import store_error_handler, validation_error_handler
 from teacher_service.api.hosts import AllowedHostsMiddleware
-from teacher_service.api.routes import curricula, health
+from teacher_service.api.routes import curricula, health, teachers
 from teacher_service.core.config import ANY_HOST, Settings
 from teacher_service.curricula import CurriculumRegistry
 from teacher_service.dashboard import router as dashboard_router
@@ -74,6 +74,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(StoreError, store_error_handler)
     app.include_router(health.router)
     app.include_router(curricula.router)
+    app.include_router(teachers.router)
     app.include_router(dashboard_router)
     add_offline_docs(app)
     app.add_middleware(MetricsMiddleware, metrics=service_metrics)

@@ -1,9 +1,19 @@
-"""The book's hand-written lesson plan for the KUKA grasp (chapter 14).
+"""A lesson plan: one task per lesson, moving on when the student is good enough at the current one.
 
-Each lesson is one task. When the mean reward of the current lesson's recent episodes exceeds a
-threshold, the curriculum moves one lesson on: jp2 and jp4 step 0.1 toward their hardest values,
-each rnd_* steps 0.05 toward its hardest, and bias_obj_y jumps to its hardest once everything else
-is there. It never falls back.
+The plan comes from the book's chapter 14 (the KUKA grasp): each lesson is one task, and when the
+mean reward of the current lesson's recent episodes exceeds a threshold the curriculum moves one
+lesson on: jp2 and jp4 step 0.1 toward their hardest values, each rnd_* steps 0.05 toward its
+hardest, and bias_obj_y jumps to its hardest once everything else is there. Over the KUKA space
+that plan is still the default, with the book's outcomes.
+
+Beyond the book, for any task space: the lessons may be given as a list of tasks, or be ``steps``
+points evenly spaced from the easiest (or ``start``) to the hardest point (the default over a space
+that is not the book's); the metric may be the success rate instead of the mean reward; and the
+plan may step back a lesson when the metric falls below ``step_back_below``, which answers the
+book's open question ("What if the agent fails in a lesson? Should it go back to the previous
+lesson?") with an option: off by default, as in the book. It helps when the difficulty is known to
+grow along one path through the space and a person can say what "good enough" means; automatic
+teachers (ALP-GMM and the rest) are for when neither is known.
 """
 
 from __future__ import annotations
@@ -12,7 +22,7 @@ import math
 import statistics
 from collections import deque
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -76,11 +86,51 @@ def lesson_plan(start: Task, hardest: Task) -> list[Task]:
     return plan
 
 
+DEFAULT_STEPS = 10
+"""Lessons of the interpolated plan when none is asked for over a space that is not the book's."""
+
+MAX_MOVES = 1000
+"""Newest moves (advances and steps back) kept in the state; a plan that keeps stepping back and
+forth would otherwise grow its snapshot with every move."""
+
+Metric = Literal["reward", "success"]
+
+
+def interpolated_plan(start: Task, hardest: Task, steps: int, space: TaskSpace) -> list[Task]:
+    """``steps`` lessons evenly spaced from ``start`` to ``hardest``, both included exactly."""
+    fractions = [index / (steps - 1) for index in range(steps)]
+    lessons = [{name: (1.0 - t) * start[name] + t * hardest[name] for name in space.names} for t in fractions]
+    return [space.from_array(space.to_array(lesson)) for lesson in lessons]
+
+
+def refuse_indistinct(plan: list[Task]) -> None:
+    """Raise ``ValueError`` when two consecutive lessons are closer than results can tell apart:
+    the results of one would count toward the other."""
+    for index, (lesson, following) in enumerate(zip(plan, plan[1:], strict=False)):
+        if all(abs(following[name] - value) <= SNAP for name, value in lesson.items()):
+            raise ValueError(
+                f"lessons {index} and {index + 1} of the plan are the same task ({lesson}): the steps are "
+                "lost to rounding, or the start is the hardest point"
+            )
+
+
 class ManualParams(TeacherParams):
     start: TaskParam | None = None
-    """First lesson; null starts at the space's easiest point, as the book does."""
+    """First lesson of a computed plan (the book's or an interpolated one); null starts at the
+    space's easiest point, as the book does."""
+    lessons: list[TaskParam] | None = Field(default=None, min_length=1, max_length=MAX_LESSONS)
+    """The lessons in order, one task each; null computes them (see ``steps``)."""
+    steps: int | None = Field(default=None, ge=2, le=MAX_LESSONS)
+    """Lessons evenly spaced from ``start`` (or the easiest point) to the hardest point, both
+    included; null means the book's plan over the book's KUKA space, and 10 lessons over any other."""
+    metric: Metric = "reward"
+    """What the window averages: each episode's reward, or its success (1 or 0; results that carry
+    no success flag are then left out)."""
     threshold: FiniteFloat = 5.5
-    """Move on when the current lesson's recent mean reward exceeds this (the book's value)."""
+    """Move on when the window's mean exceeds this (5.5 is the book's reward; a success rate
+    lies in [0, 1))."""
+    step_back_below: FiniteFloat | None = None
+    """Go back one lesson when the window's mean falls below this; null never goes back, as the book."""
     window: int = Field(default=100, ge=1, le=10_000)
     """Recent episodes of the current lesson that are averaged (RLlib's smoothing window, which
     the book's callback read)."""
@@ -91,11 +141,18 @@ class ManualParams(TeacherParams):
     def _consistent(self) -> ManualParams:
         if self.min_episodes > self.window:
             raise ValueError(f"min_episodes ({self.min_episodes}) cannot exceed window ({self.window})")
+        if self.lessons is not None and (self.start is not None or self.steps is not None):
+            raise ValueError("give either lessons, or start and steps to compute them, not both")
+        if self.metric == "success" and not 0.0 <= self.threshold < 1.0:
+            raise ValueError(f"a success-rate threshold lies in [0, 1), got {self.threshold}")
+        if self.step_back_below is not None and self.step_back_below >= self.threshold:
+            raise ValueError(f"step_back_below ({self.step_back_below}) must be below threshold ({self.threshold})")
         return self
 
 
 class ManualTeacher(Teacher):
-    """Hands out the current lesson's task and moves on when the student is good enough at it."""
+    """A lesson plan: hands out the current lesson's task, moves on when the student is good enough
+    at it, and optionally steps back when it falls behind."""
 
     kind = "manual"
     Params = ManualParams
@@ -103,19 +160,29 @@ class ManualTeacher(Teacher):
 
     def __init__(self, space: TaskSpace, seed: int, params: ManualParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
-        expected = {*LESSON_STEPS, LAST_PARAMETER}
-        if set(space.names) != expected:
-            raise ValueError(
-                f"the manual curriculum is the book's KUKA lesson plan and needs exactly the parameters "
-                f"{sorted(expected)}; this space has {sorted(space.names)}"
-            )
-        start = space.easiest() if self.params.start is None else in_space("start", self.params.start, space)
-        self.lessons = lesson_plan(start, space.hardest())
+        self.lessons = self._plan()
+        refuse_indistinct(self.lessons)
         self.lesson = 0
-        self.lesson_rewards: deque[float] = deque(maxlen=self.params.window)
+        self.lesson_scores: deque[float] = deque(maxlen=self.params.window)
         self.lesson_episodes = 0
         self.stale_results = 0
-        self.advanced_at: list[int] = []
+        self.unscored_results = 0
+        self.moves: deque[dict[str, Any]] = deque(maxlen=MAX_MOVES)
+        self.moves_total = 0
+
+    def _plan(self) -> list[Task]:
+        params, space = self.params, self.space
+        if params.lessons is not None:
+            return [in_space(f"lessons[{index}]", lesson, space) for index, lesson in enumerate(params.lessons)]
+        start = None if params.start is None else in_space("start", params.start, space)
+        try:
+            start = space.easiest() if start is None else start
+            hardest = space.hardest()
+        except ValueError as error:
+            raise ValueError(f"{error}: a computed lesson plan needs the anchors, or give lessons") from None
+        if params.steps is None and set(space.names) == {*LESSON_STEPS, LAST_PARAMETER}:
+            return lesson_plan(start, hardest)
+        return interpolated_plan(start, hardest, params.steps or DEFAULT_STEPS, space)
 
     @property
     def current(self) -> Task:
@@ -128,21 +195,37 @@ class ManualTeacher(Teacher):
         if not self._is_current(result.task):
             self.stale_results += 1
             return None
-        self.lesson_rewards.append(result.reward)
         self.lesson_episodes += 1
-        if (
-            self.lesson + 1 < len(self.lessons)
-            and len(self.lesson_rewards) >= self.params.min_episodes
-            and statistics.fmean(self.lesson_rewards) > self.params.threshold
-        ):
-            self.lesson += 1
-            self.lesson_rewards.clear()
-            self.lesson_episodes = 0
-            self.advanced_at.append(self.results_seen)
+        if self.params.metric == "reward":
+            self.lesson_scores.append(result.reward)
+        elif result.success is None:
+            self.unscored_results += 1
+            return None
+        else:
+            self.lesson_scores.append(1.0 if result.success else 0.0)
+        if len(self.lesson_scores) < self.params.min_episodes:
+            return None
+        score = statistics.fmean(self.lesson_scores)
+        floor = self.params.step_back_below
+        if self.lesson + 1 < len(self.lessons) and score > self.params.threshold:
+            self._move(self.lesson + 1, f"{self._measured(score)} > {self.params.threshold}")
+        elif self.lesson > 0 and floor is not None and score < floor:
+            self._move(self.lesson - 1, f"{self._measured(score)} < {floor}")
         return None
 
+    def _measured(self, score: float) -> str:
+        what = "mean reward" if self.params.metric == "reward" else "success rate"
+        return f"{what} {score:.4g} over {len(self.lesson_scores)} episodes"
+
+    def _move(self, lesson: int, why: str) -> None:
+        self.moves.append({"at_results": self.results_seen, "from": self.lesson, "to": lesson, "why": why})
+        self.moves_total += 1
+        self.lesson = lesson
+        self.lesson_scores.clear()
+        self.lesson_episodes = 0
+
     def _is_current(self, task: Task) -> bool:
-        """Results of tasks handed out before the last advance still arrive; they say nothing
+        """Results of tasks handed out before the last move still arrive; they say nothing
         about the new lesson."""
         return all(math.isclose(task[name], value, rel_tol=0.0, abs_tol=SNAP) for name, value in self.current.items())
 
@@ -151,20 +234,27 @@ class ManualTeacher(Teacher):
             "lesson": self.lesson,
             "lessons": len(self.lessons),
             "lesson_params": dict(self.current),
+            "plan": [dict(lesson) for lesson in self.lessons],
             "final_lesson": self.lesson == len(self.lessons) - 1,
             "lesson_episodes": self.lesson_episodes,
-            "recent_mean_reward": statistics.fmean(self.lesson_rewards) if self.lesson_rewards else None,
+            "metric": self.params.metric,
+            "recent_metric": statistics.fmean(self.lesson_scores) if self.lesson_scores else None,
             "stale_results": self.stale_results,
-            "advanced_at_results": list(self.advanced_at),
+            "unscored_results": self.unscored_results,
+            "moves": [dict(move) for move in self.moves],
+            "moves_total": self.moves_total,
+            "advanced_at_results": [move["at_results"] for move in self.moves if move["to"] > move["from"]],
         }
 
     def _export(self) -> dict[str, Any]:
         return {
             "lesson": self.lesson,
-            "lesson_rewards": list(self.lesson_rewards),
+            "lesson_scores": list(self.lesson_scores),
             "lesson_episodes": self.lesson_episodes,
             "stale_results": self.stale_results,
-            "advanced_at": list(self.advanced_at),
+            "unscored_results": self.unscored_results,
+            "moves": [dict(move) for move in self.moves],
+            "moves_total": self.moves_total,
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
@@ -172,7 +262,17 @@ class ManualTeacher(Teacher):
         if not 0 <= lesson < len(self.lessons):
             raise ValueError(f"lesson {lesson} is not in this plan of {len(self.lessons)} lessons")
         self.lesson = lesson
-        self.lesson_rewards.extend(float(reward) for reward in state["lesson_rewards"])
+        self.lesson_scores.extend(float(score) for score in state["lesson_scores"])
         self.lesson_episodes = int(state["lesson_episodes"])
         self.stale_results = int(state["stale_results"])
-        self.advanced_at = [int(count) for count in state["advanced_at"]]
+        self.unscored_results = int(state["unscored_results"])
+        self.moves.extend(
+            {
+                "at_results": int(move["at_results"]),
+                "from": int(move["from"]),
+                "to": int(move["to"]),
+                "why": str(move["why"]),
+            }
+            for move in state["moves"]
+        )
+        self.moves_total = int(state["moves_total"])

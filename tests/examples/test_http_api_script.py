@@ -11,6 +11,7 @@ import pytest
 from example_runner import EXAMPLES, curriculum_state, finish, start_example
 
 from common.curriculum_wrapper import TOKEN_VARIABLE
+from teacher_service.teachers import TEACHER_KINDS
 
 pytestmark = pytest.mark.skipif(not (shutil.which("curl") and shutil.which("jq")), reason="needs curl and jq")
 
@@ -21,6 +22,8 @@ def test_the_script_registers_takes_tasks_posts_results_and_reads_the_state(teac
     assert lines[0] == f"watch the curriculum at {teacher.url}/curricula/shell"
     tasks = [json.loads(line) for line in lines if line.startswith('{"task_id"')]
     assert len(tasks) == 3
+    kinds = [line.split(":")[0].strip() for line in lines if line.startswith("  ")]
+    assert kinds == sorted(TEACHER_KINDS), "step 0 lists every teacher kind"
     assert {"accepted": 3, "duplicates": 0, "expired": 0} in [
         json.loads(line) for line in lines if line.startswith("{")
     ]

@@ -98,3 +98,23 @@ def test_sb3_ppo_trains_on_a_task_space_of_its_own(teacher, tmp_path):
     assert [p["name"] for p in state["curriculum"]["config"]["space"]] == list(PENDULUM_TASK_SPACE.names)
     gravities = [result["params"]["gravity"] for result in results.values()]
     assert max(gravities) - min(gravities) > 2.0, "the tasks vary"
+
+
+def test_any_teacher_kind_with_its_own_parameters_drives_the_training(teacher, tmp_path):
+    params = ("window=5", "min_episodes=5", "threshold=-2000", "steps=3")
+    example = start_example(
+        "sb3_pendulum_gravity.py",
+        *("--teacher-url", teacher.url, "--total-steps", "1024", "--envs", "1", "--log-dir", str(tmp_path / "run")),
+        *("--teacher", "manual", *[flag for param in params for flag in ("--teacher-param", param)]),
+    )
+    output = finish(example, timeout=300)
+    assert f"watch the curriculum at {teacher.url}/curricula/pendulum-manual" in output
+
+    state = curriculum_state(teacher, "pendulum-manual")
+    assert state["curriculum"]["config"]["teacher"] == "manual"
+    assert state["teacher"]["params"] | {"threshold": -2000.0, "window": 5, "steps": 3} == state["teacher"]["params"]
+    assert state["curriculum"]["counters"]["results_received"] == 1024 // 200
+    assert [(m["at_results"], m["from"], m["to"]) for m in state["teacher"]["moves"]] == [(5, 0, 1)], (
+        "five episodes of the first lesson, all above -2000: the plan moves on"
+    )
+    assert {r["params"]["gravity"] for r in state["recent_results"]} == {PENDULUM_TASK_SPACE.easiest()["gravity"]}

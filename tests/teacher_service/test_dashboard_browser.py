@@ -23,6 +23,7 @@ from bench.dashboard_screenshot import DEBIAN_CHROMIUM, launch_chromium
 from common.schemas import API_PREFIX, ParameterSpec
 from common.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess
+from teacher_service.teachers import TEACHER_KINDS
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
@@ -234,7 +235,7 @@ def test_curricula_page_links_to_a_manual_curriculum_showing_its_lesson(
     assert f"Lesson {teacher['lesson'] + 1} of {teacher['lessons']}" in lesson.inner_text()
     shown = {name: float(value) for name, value in definitions(page, "#lesson").items()}
     assert shown == pytest.approx(teacher["lesson_params"], abs=1e-3)
-    assert "fits no mixture" in page.inner_text("#alp-empty")
+    assert "measures no learning progress" in page.inner_text("#alp-empty")
     target = traces(page, "difficulty-plot")["difficulty-target"][0]
     np.testing.assert_allclose(target["x"], [_difficulty(p, teacher["lesson_params"][p["name"]]) for p in SPACE])
     assert problems == PageProblems()
@@ -294,3 +295,130 @@ def test_fits_that_were_abandoned_or_superseded_are_listed_with_the_reason(brows
         assert page.locator("#fits-stopped").is_hidden()
         assert problems == PageProblems()
         page.close()
+
+
+def assert_state_drawn(page: Page, teacher: dict[str, Any], x: str, y: str) -> None:
+    """Whatever the teacher's state holds under the dashboard conventions is drawn on the (x, y)
+    picker and in the teacher card, whichever kind it is."""
+    space = traces(page, "space-plot")
+
+    def rectangle(low: dict[str, float], high: dict[str, float]) -> tuple[list[float], list[float]]:
+        return [low[x], high[x], high[x], low[x], low[x]], [low[y], low[y], high[y], high[y], low[y]]
+
+    assert len(space.get("ellipse", [])) == len(teacher.get("components", []))
+    assert len(space.get("region", [])) == len(teacher.get("regions", []))
+    for trace, region in zip(space.get("region", []), teacher.get("regions", []), strict=True):
+        assert (trace["x"], trace["y"]) == pytest.approx(rectangle(region["low"], region["high"]))
+    if "bounds" in teacher:
+        bounds = space["bounds"][0]
+        assert (bounds["x"], bounds["y"]) == pytest.approx(
+            rectangle(teacher["bounds"]["low"], teacher["bounds"]["high"])
+        )
+    if teacher.get("particles"):
+        drawn = space["particles"][0]
+        assert drawn["x"] == pytest.approx([p[x] for p in teacher["particles"]])
+        assert drawn["y"] == pytest.approx([p[y] for p in teacher["particles"]])
+    if "plan" in teacher:
+        assert space["plan"][0]["x"] == pytest.approx([lesson[x] for lesson in teacher["plan"]])
+        assert space["plan"][0]["y"] == pytest.approx([lesson[y] for lesson in teacher["plan"]])
+    now = teacher.get("lesson_params", teacher.get("point"))
+    if now is not None:
+        assert (space["current-task"][0]["x"], space["current-task"][0]["y"]) == ([now[x]], [now[y]])
+    moves = teacher.get("moves")
+    assert page.locator("#moves-box").is_visible() == (moves is not None)
+    if moves:
+        rows = page.locator("#moves-rows tr").all_inner_texts()
+        assert len(rows) == min(len(moves), 50)
+        assert rows[0].split("\t")[-1] == moves[-1]["why"], "newest first"
+
+
+@pytest.mark.parametrize("kind", sorted(TEACHER_KINDS))
+def test_every_kind_renders_its_own_state_with_no_console_error(
+    browser: Browser, service: ServiceProcess, kind: str
+) -> None:
+    name = f"kind-{kind}"
+    create_curriculum(service, name, kind, {"fit_rate": FIT_RATE} if kind == "alp-gmm" else {})
+    train(service, name, 2 * FIT_RATE)
+    teacher = wait_for_fits(service, name)["teacher"]
+
+    page, problems = open_page(browser, f"{service.url}/curricula/{name}", service)
+    page.wait_for_function(
+        "() => (document.getElementById('space-plot').data || []).some(t => t.meta === 'tasks' && t.x.length > 0)"
+    )
+    assert page.inner_text("#kind") == kind
+    assert_state_drawn(page, teacher, "rnd_obj_x", "rnd_obj_y")
+    shown = definitions(page, "#teacher-state")
+    scalars = {k: v for k, v in teacher.items() if not isinstance(v, (dict, list))}
+    assert set(shown) == set(scalars) - {"kind", "seed", "tasks_sampled", "results_seen"}
+    select_dimensions(page, "jp2", "jp4")
+    assert_state_drawn(page, teacher, "jp2", "jp4")
+    page.wait_for_timeout(3000)  # one more poll, which must redraw cleanly too
+    assert problems == PageProblems()
+    page.close()
+
+
+def test_a_lesson_plan_that_steps_back_shows_its_lessons_and_moves(browser: Browser, service: ServiceProcess) -> None:
+    space = [
+        {"name": "gravity", "low": 2.0, "high": 12.0, "hardest": 12.0, "easiest": 2.0},
+        {"name": "mass", "low": 0.5, "high": 1.5, "hardest": 1.5, "easiest": 0.5},
+    ]
+    params = {"steps": 4, "window": 4, "min_episodes": 4, "threshold": 5.0, "step_back_below": 1.0}
+    body = {"teacher": "manual", "space": space, "params": params, "seed": 0}
+    with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula", headers=WRITES, timeout=10) as client:
+        assert client.put("/plan-back", json=body).status_code == 201
+        for reward in (6.0, 6.0, 0.0):
+            tasks = client.post("/plan-back/tasks", json={"count": 4}).raise_for_status().json()["tasks"]
+            results = [{"task_id": task["task_id"], "reward": reward} for task in tasks]
+            client.post("/plan-back/results", json={"results": results}).raise_for_status()
+        teacher = client.get("/plan-back/state").raise_for_status().json()["teacher"]
+    assert [(m["from"], m["to"]) for m in teacher["moves"]] == [(0, 1), (1, 2), (2, 1)]
+
+    page, problems = open_page(browser, f"{service.url}/curricula/plan-back", service)
+    page.wait_for_function("() => (document.getElementById('moves-plot').data || []).length > 0")
+    assert_state_drawn(page, teacher, "gravity", "mass")
+    timeline = traces(page, "moves-plot")["moves"][0]
+    assert (timeline["x"], timeline["y"]) == ([0, 4, 8, 12], [0, 1, 2, 1])
+    assert page.inner_text("#moves-note") == "3 in all"
+    assert "Lesson 2 of 4" in page.inner_text("#lesson")
+    assert "back below 1" in page.inner_text("#lesson")
+    assert definitions(page, "#teacher-state")["lesson"] == "1"
+    assert problems == PageProblems()
+    page.close()
+
+
+def test_regions_bounds_and_particles_are_drawn_by_the_conventions(browser: Browser, service: ServiceProcess) -> None:
+    """The state entries that kinds on other branches publish (RIAC's regions, ADR's bounds,
+    CURROT's particles), handed to the page's own renderers as the conventions shape them."""
+    create_curriculum(service, "conventions", "random", {})
+    train(service, "conventions", 10, batch=10)
+    page, problems = open_page(browser, f"{service.url}/curricula/conventions", service)
+    page.wait_for_function(
+        "() => (document.getElementById('space-plot').data || []).some(t => t.meta === 'tasks' && t.x.length > 0)"
+    )
+    low = {"a": 0.0, "b": 1.0}
+    teacher = {
+        "regions": [
+            {"low": low, "high": {"a": 0.5, "b": 2.0}, "progress": 0.1, "results": 3},
+            {"low": {"a": 0.5, "b": 1.0}, "high": {"a": 1.0, "b": 2.0}, "progress": -0.4, "results": 9},
+        ],
+        "bounds": {"low": low, "high": {"a": 0.25, "b": 1.5}, "low_boundary_probability": 0.5},
+        "particles": [{"a": 0.1, "b": 1.1}, {"a": 0.2, "b": 1.9}],
+        "particle_values": [1.0, 2.0],
+    }
+    drawn = page.evaluate(
+        """teacher => [...stateBackdrop(teacher, "a", "b"), ...stateMarks(teacher, "a", "b")].map(t => ({
+            meta: t.meta, x: t.x, y: t.y, fill: t.fillcolor ?? null,
+        }))""",
+        teacher,
+    )
+    by_meta: dict[str, list[dict[str, Any]]] = {}
+    for trace in drawn:
+        by_meta.setdefault(trace["meta"], []).append(trace)
+    assert [trace["x"] for trace in by_meta["region"]] == [[0.0, 0.5, 0.5, 0.0, 0.0], [0.5, 1.0, 1.0, 0.5, 0.5]]
+    assert by_meta["region"][0]["y"] == [1.0, 1.0, 2.0, 2.0, 1.0]
+    assert by_meta["region"][0]["fill"] != by_meta["region"][1]["fill"], "coloured by progress"
+    assert by_meta["bounds"][0]["x"] == [0.0, 0.25, 0.25, 0.0, 0.0]
+    assert by_meta["bounds"][0]["y"] == [1.0, 1.0, 1.5, 1.5, 1.0]
+    assert (by_meta["particles"][0]["x"], by_meta["particles"][0]["y"]) == ([0.1, 0.2], [1.1, 1.9])
+    assert problems == PageProblems()
+    page.close()

@@ -31,6 +31,7 @@ def _hostile_requests(kuka_space: list[dict[str, Any]]) -> dict[str, Callable[[h
     return {
         "a lesson plan of millions of lessons": put("manual", wide),
         "a lesson plan whose steps are lost to rounding": put("manual", far),
+        "a billion interpolated lessons": put("manual", kuka_space, steps=10**9),
         "a 43 TiB nearest-neighbour buffer": put("alp-gmm", kuka_space, buffer_size=10**12),
         "a billion results between fits": put("alp-gmm", kuka_space, fit_rate=10**9),
         "a million EM restarts": put("alp-gmm", kuka_space, nb_em_init=10**6),

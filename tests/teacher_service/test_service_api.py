@@ -115,9 +115,16 @@ def test_put_explains_what_is_wrong_with_a_curriculum(http, kuka_space, change, 
     assert http.get("/curricula/put-bad").status_code == 404
 
 
-def test_manual_teacher_needs_the_kuka_parameters(http):
-    errors = _errors(_create(http, "put-manual", [{"name": "x", "low": 0.0, "high": 1.0}], teacher="manual"))
-    assert any("lesson plan" in msg for _, msg in errors)
+def test_a_lesson_plan_over_any_space_needs_its_anchors_or_its_lessons(http):
+    bare = [{"name": "x", "low": 0.0, "high": 1.0}]
+    errors = _errors(_create(http, "put-manual", bare, teacher="manual"))
+    assert any("needs the anchors, or give lessons" in msg for _, msg in errors)
+    anchored = [{**bare[0], "easiest": 0.0, "hardest": 1.0}]
+    assert _create(http, "put-manual", anchored, teacher="manual", params={"steps": 5}).status_code == 201
+    assert [task["params"] for task in _draw(http, "put-manual", 2)] == [{"x": 0.0}] * 2
+    listed = {"lessons": [{"x": 0.5}, {"x": 0.75}]}
+    assert _create(http, "put-manual-listed", bare, teacher="manual", params=listed).status_code == 201
+    assert [task["params"] for task in _draw(http, "put-manual-listed", 1)] == [{"x": 0.5}]
 
 
 def test_curriculum_names_are_checked(http, kuka_space):

@@ -219,6 +219,7 @@ function renderCurriculum(state) {
   renderAlp(state);
   renderDifficulty(state);
   renderFits(state);
+  renderTeacherState(state);
 }
 
 function setUpDimensions(space) {
@@ -357,7 +358,7 @@ function renderTaskSpace() {
   const [xIndex, yIndex] = [xName, yName].map((name) => view.dimensions.indexOf(name));
   const results = state.recent_results.slice(-SCATTER_RESULTS);
   const components = state.teacher.components ?? [];
-  const alps = components.map((c) => c.mean_alp);
+  const alps = components.map((c) => c.mean_alp ?? 0);
   const alpMax = Math.max(1e-9, ...alps);
 
   const origins = state.teacher.recent_task_origins;
@@ -374,13 +375,14 @@ function renderTaskSpace() {
       [component.mean[xName], component.mean[yName]],
       cov[xIndex][xIndex], cov[yIndex][yIndex], cov[xIndex][yIndex], ELLIPSE_SIGMAS,
     );
-    const colour = scaleColour(ALP_SCALE, component.mean_alp / alpMax);
+    const colour = scaleColour(ALP_SCALE, alps[k] / alpMax);
     return {
       meta: "ellipse", name: `component ${k + 1}`, x: xs, y: ys, type: "scatter", mode: "lines",
-      line: { color: colour, width: 1.5 + 2 * (component.mean_alp / alpMax) }, fill: "toself",
+      line: { color: colour, width: 1.5 + 2 * (alps[k] / alpMax) }, fill: "toself",
       fillcolor: withAlpha(colour, 0.05), hoverinfo: "skip",
     };
   });
+  traces.unshift(...stateBackdrop(state.teacher, xName, yName));
   traces.push({
     meta: "tasks", name: "tasks", type: "scatter", mode: "markers",
     x: results.map((r) => r.params[xName]), y: results.map((r) => r.params[yName]),
@@ -406,6 +408,7 @@ function renderTaskSpace() {
       hovertemplate: "component %{text}<br>mean ALP %{customdata[0]:.3f}<br>weight %{customdata[1]:.2f}<extra></extra>",
     });
   }
+  traces.push(...stateMarks(state.teacher, xName, yName));
   const range = (name) => {
     const p = space.find((q) => q.name === name);
     const pad = 0.04 * (p.high - p.low || 1);
@@ -425,7 +428,7 @@ function renderTaskSpace() {
 }
 
 function renderAlp(state) {
-  const components = state.teacher.components ?? [];
+  const components = (state.teacher.components ?? []).filter((c) => c.mean_alp !== undefined);
   const empty = document.getElementById("alp-empty");
   const plot = document.getElementById("alp-plot");
   if (!components.length) {
@@ -436,7 +439,7 @@ function renderAlp(state) {
     empty.textContent =
       state.curriculum.config.teacher === "alp-gmm"
         ? `Bootstrapping on ${bootstrapTasks}; the first fit comes at ${formatNumber(state.teacher.next_fit_at_results)} results.`
-        : `The ${state.curriculum.config.teacher} teacher fits no mixture.`;
+        : `The ${state.curriculum.config.teacher} teacher measures no learning progress per component.`;
     return;
   }
   empty.hidden = true;
@@ -535,14 +538,11 @@ function renderLesson(state) {
   const teacher = state.teacher;
   box.hidden = teacher.lesson_params === undefined;
   if (box.hidden) return;
-  const mean = teacher.recent_mean_reward;
   const summary = document.createElement("p");
   summary.append(
     "Lesson ",
     Object.assign(document.createElement("strong"), { textContent: `${teacher.lesson + 1} of ${teacher.lessons}` }),
-    ` · ${formatNumber(teacher.lesson_episodes)} episodes in this lesson` +
-      ` · mean reward ${mean === null ? "–" : formatNumber(mean)}` +
-      (teacher.final_lesson ? " · final lesson" : ` (moves on above ${formatNumber(teacher.params.threshold)})`),
+    ` · ${formatNumber(teacher.lesson_episodes)} episodes in this lesson · ${lessonRule(teacher)}`,
   );
   const params = document.createElement("dl");
   params.className = "params";
@@ -586,6 +586,157 @@ function renderFits(state) {
         [outcome, className],
       ]) {
         row.append(Object.assign(document.createElement("td"), { textContent: text, className: cellClass }));
+/** "mean reward 4.2 (moves on above 5.5, back below 1)": the lesson plan's metric and its rule. */
+function lessonRule(teacher) {
+  const metric = teacher.metric === "success" ? "success rate" : "mean reward";
+  const value = teacher.recent_metric ?? null;
+  const { threshold, step_back_below: floor } = teacher.params;
+  const rules = [];
+  if (!teacher.final_lesson) rules.push(`moves on above ${formatNumber(threshold)}`);
+  if (floor != null && teacher.lesson > 0) rules.push(`back below ${formatNumber(floor)}`);
+  const shown = `${metric} ${value === null ? "–" : formatNumber(value)}`;
+  return `${shown}${rules.length ? ` (${rules.join(", ")})` : ""}${teacher.final_lesson ? " · final lesson" : ""}`;
+}
+
+/* ---------- each teacher's own state, keyed on the state's entries (not on kind names) ---------- */
+
+const REGION_SCALE = [[0, "#e0f2fe"], [0.5, "#38bdf8"], [1, "#075985"]];
+const STATE_SHOWN_ELSEWHERE = new Set(["kind", "seed", "params", "tasks_sampled", "results_seen"]);
+const MOVES_LISTED = 50;
+
+function rectangle(low, high, xName, yName) {
+  const [x0, x1, y0, y1] = [low[xName], high[xName], low[yName], high[yName]];
+  return { x: [x0, x1, x1, x0, x0], y: [y0, y0, y1, y1, y0] };
+}
+
+/** Traces drawn under the tasks: `regions` coloured by progress, the `bounds` outline, the lesson `plan`. */
+function stateBackdrop(teacher, xName, yName) {
+  const traces = [];
+  const regions = teacher.regions ?? [];
+  const progressMax = Math.max(1e-9, ...regions.map((r) => Math.abs(r.progress)));
+  regions.forEach((region, k) => {
+    const colour = scaleColour(REGION_SCALE, Math.abs(region.progress) / progressMax);
+    traces.push({
+      meta: "region", name: `region ${k + 1}`, type: "scatter", mode: "lines", ...rectangle(region.low, region.high, xName, yName),
+      fill: "toself", fillcolor: withAlpha(colour, 0.35), line: { color: withAlpha(colour, 0.9), width: 1 },
+      hoveron: "fills", hoverinfo: "text",
+      text: `region ${k + 1}<br>progress ${formatNumber(region.progress)}<br>${formatNumber(region.results)} results`,
+    });
+  });
+  if (regions.length) {
+    traces.push({
+      meta: "region-centres", name: "region progress", type: "scatter", mode: "markers",
+      x: regions.map((r) => (r.low[xName] + r.high[xName]) / 2), y: regions.map((r) => (r.low[yName] + r.high[yName]) / 2),
+      customdata: regions.map((r) => [r.progress, r.results]),
+      marker: {
+        size: 4, color: regions.map((r) => Math.abs(r.progress)), cmin: 0, cmax: progressMax, colorscale: REGION_SCALE,
+        colorbar: { title: { text: "|progress|", side: "right" }, x: 1.13, xpad: 8, thickness: 12, len: 0.9 },
+      },
+      hovertemplate: "progress %{customdata[0]:.3f}<br>%{customdata[1]} results<extra></extra>",
+    });
+  }
+  if (teacher.bounds) {
+    traces.push({
+      meta: "bounds", name: "bounds", type: "scatter", mode: "lines", ...rectangle(teacher.bounds.low, teacher.bounds.high, xName, yName),
+      line: { color: "#dc2626", width: 2, dash: "dash" }, hoverinfo: "skip",
+    });
+  }
+  if (teacher.plan) {
+    traces.push({
+      meta: "plan", name: "lesson plan", type: "scatter", mode: "lines+markers",
+      x: teacher.plan.map((lesson) => lesson[xName]), y: teacher.plan.map((lesson) => lesson[yName]),
+      text: teacher.plan.map((_, k) => `lesson ${k + 1}`),
+      line: { color: MUTED, width: 1, dash: "dot" }, marker: { size: 5, color: MUTED },
+      hovertemplate: "%{text}<extra></extra>",
+    });
+  }
+  return traces;
+}
+
+/** Traces drawn over the tasks: `particles` and the task the teacher hands out now (a lesson or a fixed point). */
+function stateMarks(teacher, xName, yName) {
+  const traces = [];
+  const particles = teacher.particles ?? [];
+  if (particles.length) {
+    const values = teacher.particle_values ?? null;
+    traces.push({
+      meta: "particles", name: "particles", type: "scatter", mode: "markers",
+      x: particles.map((p) => p[xName]), y: particles.map((p) => p[yName]),
+      customdata: values ?? particles.map(() => null),
+      marker: { size: 7, symbol: "circle-open", color: "#7c3aed", line: { width: 1.5 } },
+      hovertemplate: values ? "particle<br>value %{customdata:.3f}<extra></extra>" : "particle<extra></extra>",
+    });
+  }
+  const now = teacher.lesson_params ?? teacher.point ?? null;
+  if (now) {
+    const label = teacher.lesson_params ? `lesson ${teacher.lesson + 1}` : "fixed task";
+    traces.push({
+      meta: "current-task", name: label, type: "scatter", mode: "markers", x: [now[xName]], y: [now[yName]],
+      marker: { symbol: "diamond", size: 14, color: "#dc2626", line: { width: 1.5, color: "#fff" } },
+      hovertemplate: `${label}<extra></extra>`,
+    });
+  }
+  return traces;
+}
+
+/** The teacher card: its scalar state entries and the history of its `moves`. */
+function renderTeacherState(state) {
+  const teacher = state.teacher;
+  const scalars = Object.entries(teacher).filter(
+    ([name, value]) => !STATE_SHOWN_ELSEWHERE.has(name) && (value === null || typeof value !== "object"),
+  );
+  const moves = teacher.moves ?? null;
+  const card = document.getElementById("teacher-card");
+  card.hidden = !scalars.length && moves === null;
+  if (card.hidden) return;
+  document.getElementById("teacher-state").replaceChildren(
+    ...scalars.map(([name, value]) => {
+      const item = document.createElement("div");
+      item.append(
+        Object.assign(document.createElement("dt"), { textContent: name }),
+        Object.assign(document.createElement("dd"), { textContent: formatValue(value) }),
+      );
+      return item;
+    }),
+  );
+  document.getElementById("moves-box").hidden = moves === null;
+  if (moves !== null) renderMoves(moves, teacher.moves_total ?? moves.length);
+}
+
+function renderMoves(moves, total) {
+  setText(
+    "moves-note",
+    moves.length < total ? `newest ${formatNumber(moves.length)} of ${formatNumber(total)}` : `${formatNumber(total)} in all`,
+  );
+  document.getElementById("moves-empty").hidden = moves.length > 0;
+  const plot = document.getElementById("moves-plot");
+  const numeric = moves.length > 0 && moves.every((m) => typeof m.from === "number" && typeof m.to === "number");
+  plot.hidden = !numeric;
+  if (numeric) {
+    Plotly.react(
+      plot,
+      [{
+        meta: "moves", name: "moves", type: "scatter", mode: "lines+markers", line: { shape: "hv", color: "#2563eb" },
+        x: [0, ...moves.map((m) => m.at_results)], y: [moves[0].from, ...moves.map((m) => m.to)],
+        text: ["", ...moves.map((m) => m.why)], hovertemplate: "after %{x} results: %{y}<br>%{text}<extra></extra>",
+      }],
+      baseLayout({
+        margin: { l: 52, r: 16, t: 8, b: 40 },
+        xaxis: axis("results"),
+        yaxis: axis("moved to", { rangemode: "tozero" }),
+        uirevision: "moves",
+      }),
+      PLOT_CONFIG,
+    );
+  }
+  const newestFirst = moves.slice(-MOVES_LISTED).reverse();
+  document.getElementById("moves-rows").replaceChildren(
+    ...newestFirst.map((move) => {
+      const row = document.createElement("tr");
+      for (const [text, className] of [
+        [formatNumber(move.at_results), "number"], [formatValue(move.from), ""], [formatValue(move.to), ""], [move.why, ""],
+      ]) {
+        row.append(Object.assign(document.createElement("td"), { textContent: text, className }));
       }
       return row;
     }),

@@ -1,7 +1,9 @@
-"""The book's lesson plan: its step sizes, its threshold rule, and that it never falls back."""
+"""The lesson plan: the book's step sizes and threshold rule over the KUKA space (it never falls back
+by default), interpolated and listed plans over any space, the success metric, and stepping back."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -105,10 +107,110 @@ def test_starts_where_asked_and_describes_the_lesson() -> None:
     assert teacher.state()["lesson_params"] == KUKA_TASK_SPACE.hardest()
 
 
-def test_rejects_a_space_without_the_books_parameters() -> None:
-    space = TaskSpace([Parameter("difficulty", 0.0, 1.0, hardest=1.0, easiest=0.0)])
-    with pytest.raises(ValueError, match="needs exactly the parameters"):
+DIFFICULTY = TaskSpace(
+    [
+        Parameter("gravity", 2.0, 12.0, hardest=12.0, easiest=2.0),
+        Parameter("mass", 0.5, 1.5, hardest=1.5, easiest=0.5),
+    ]
+)
+
+
+def test_a_space_that_is_not_the_books_gets_lessons_interpolated_to_the_hardest_point() -> None:
+    teacher = make_teacher("manual", DIFFICULTY, 0, {"window": 3, "min_episodes": 3, "threshold": 0.0})
+    assert teacher.state()["lessons"] == 10
+    seen = []
+    while not teacher.state()["final_lesson"]:
+        seen.append(teacher.sample(1)[0])
+        report(teacher, [1.0] * 3)
+    seen.append(teacher.sample(1)[0])
+    assert seen[0] == DIFFICULTY.easiest() and seen[-1] == DIFFICULTY.hardest()
+    gravity = [lesson["gravity"] for lesson in seen]
+    assert gravity == pytest.approx([2.0 + 10.0 * k / 9 for k in range(10)])
+    assert [lesson["mass"] for lesson in seen] == pytest.approx([0.5 + k / 9 for k in range(10)])
+
+
+def test_lessons_given_as_a_list_are_handed_out_in_order() -> None:
+    plan = [{"gravity": 2.0, "mass": 1.5}, {"gravity": 12.0, "mass": 0.5}, {"gravity": 7.0, "mass": 1.0}]
+    teacher = make_teacher("manual", DIFFICULTY, 0, {"lessons": plan, "window": 2, "min_episodes": 2})
+    for lesson in plan:
+        assert teacher.sample(3) == [lesson] * 3
+        report(teacher, [6.0] * 2)
+    assert teacher.state()["plan"] == plan
+
+
+def test_steps_over_the_kuka_space_replace_the_books_plan() -> None:
+    teacher = manual(steps=3, threshold=0.0)
+    halfway = teacher.state()["plan"][1]
+    easiest, hardest = KUKA_TASK_SPACE.easiest(), KUKA_TASK_SPACE.hardest()
+    assert halfway == pytest.approx({name: (easiest[name] + hardest[name]) / 2 for name in easiest})
+
+
+def test_a_student_that_gets_worse_makes_it_step_back() -> None:
+    teacher = make_teacher(
+        "manual", DIFFICULTY, 0, {"steps": 4, "window": 4, "min_episodes": 4, "threshold": 5.0, "step_back_below": 1.0}
+    )
+    plan = teacher.state()["plan"]
+    report(teacher, [6.0] * 4)
+    report(teacher, [6.0] * 4)
+    assert teacher.state()["lesson"] == 2
+    report(teacher, [0.5] * 3)
+    assert teacher.state()["lesson"] == 2, "three episodes are below min_episodes"
+    report(teacher, [0.5])
+    state = teacher.state()
+    assert state["lesson"] == 1
+    assert teacher.sample(1)[0] == plan[1]
+    assert [(m["at_results"], m["from"], m["to"]) for m in state["moves"]] == [(4, 0, 1), (8, 1, 2), (12, 2, 1)]
+    assert state["moves"][-1]["why"] == "mean reward 0.5 over 4 episodes < 1.0"
+    assert state["advanced_at_results"] == [4, 8]
+    report(teacher, [0.0] * 4)
+    report(teacher, [0.0] * 40)
+    assert teacher.state()["lesson"] == 0, "never before the first lesson"
+
+
+def test_the_success_rate_can_decide_and_results_without_it_are_left_out() -> None:
+    teacher = make_teacher(
+        "manual",
+        DIFFICULTY,
+        0,
+        {"metric": "success", "threshold": 0.7, "step_back_below": 0.3, "window": 4, "min_episodes": 4},
+    )
+    for success in (True, None, True, False):
+        teacher.observe(EpisodeResult(teacher.sample(1)[0], 100.0, success=success))
+    assert teacher.state()["lesson"] == 0, "three scored episodes are below min_episodes"
+    assert teacher.state()["unscored_results"] == 1
+    teacher.observe(EpisodeResult(teacher.sample(1)[0], -100.0, success=True))
+    assert teacher.state()["lesson"] == 1, "success rate (1 + 1 + 0 + 1) / 4 = 0.75 > 0.7 whatever the reward"
+    for _ in range(4):
+        teacher.observe(EpisodeResult(teacher.sample(1)[0], 100.0, success=False))
+    assert teacher.state()["lesson"] == 0
+    assert teacher.state()["moves"][-1]["why"] == "success rate 0 over 4 episodes < 0.3"
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"lessons": [{"gravity": 2.0, "mass": 0.5}], "steps": 3}, "not both"),
+        ({"metric": "success"}, r"success-rate threshold lies in \[0, 1\)"),
+        ({"threshold": 1.0, "step_back_below": 1.0}, "must be below threshold"),
+        ({"lessons": [{"gravity": 20.0, "mass": 0.5}]}, r"lessons\[0\]: task parameter 'gravity'=20.0 is outside"),
+        ({"start": DIFFICULTY.hardest()}, "lessons 0 and 1 of the plan are the same task"),
+        (
+            {"start": {"gravity": 1.0, "mass": 0.5}},
+            r"^start: task parameter 'gravity'=1.0 is outside its bounds \[2.0, 12.0\]$",
+        ),
+        ({"steps": 1001}, "less than or equal to 1000"),
+    ],
+)
+def test_inconsistent_plans_are_refused(params: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        make_teacher("manual", DIFFICULTY, 0, params)
+
+
+def test_a_computed_plan_needs_the_anchors() -> None:
+    space = TaskSpace([Parameter("difficulty", 0.0, 1.0)])
+    with pytest.raises(ValueError, match="needs the anchors, or give lessons"):
         make_teacher("manual", space, 0)
+    assert make_teacher("manual", space, 0, {"lessons": [{"difficulty": 0.5}]}).sample(1) == [{"difficulty": 0.5}]
 
 
 def _kuka_space_with(name: str, **anchors: float) -> TaskSpace:
@@ -133,3 +235,20 @@ def test_a_plan_too_long_or_that_never_arrives_is_refused_at_once(anchors: dict[
 def test_the_longest_allowed_plan_is_built() -> None:
     space = _kuka_space_with("rnd_obj_x", low=0.0, high=49.95, easiest=0.0, hardest=49.95)
     assert make_teacher("manual", space, 0).state()["lessons"] == 1000
+
+
+def test_a_restored_plan_keeps_its_lesson_window_and_moves() -> None:
+    params = {"steps": 5, "window": 4, "min_episodes": 2, "threshold": 5.0, "step_back_below": 1.0}
+    original = make_teacher("manual", DIFFICULTY, 0, params)
+    report(original, [6.0] * 4 + [0.0] * 2 + [6.0] * 2 + [9.0])
+    state = original.state()
+    assert [(m["from"], m["to"]) for m in state["moves"]] == [(0, 1), (1, 2), (2, 1), (1, 2)]
+    assert state["lesson_episodes"] == 1
+
+    restored = make_teacher("manual", DIFFICULTY, 0, params)
+    restored.restore(json.loads(json.dumps(original.snapshot())), original.history(0))
+    assert restored.state() == state
+    for teacher in (original, restored):
+        report(teacher, [0.0, 6.0, 0.0, 0.0, 7.0, 7.0])
+    assert restored.state() == original.state()
+    assert restored.sample(3) == original.sample(3)
