@@ -586,6 +586,13 @@ function renderFits(state) {
         [outcome, className],
       ]) {
         row.append(Object.assign(document.createElement("td"), { textContent: text, className: cellClass }));
+      }
+      return row;
+    }),
+  );
+  document.getElementById("fits-empty").hidden = fits.length > 0;
+}
+
 /** "mean reward 4.2 (moves on above 5.5, back below 1)": the lesson plan's metric and its rule. */
 function lessonRule(teacher) {
   const metric = teacher.metric === "success" ? "success rate" : "mean reward";
@@ -741,7 +748,6 @@ function renderMoves(moves, total) {
       return row;
     }),
   );
-  document.getElementById("fits-empty").hidden = fits.length > 0;
 }
 
 /* ---------- start ---------- */
