@@ -16,6 +16,7 @@ from pydantic import Field, TypeAdapter, ValidationError
 from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
+from teacher_service.teachers.currot import CurrotParams
 from teacher_service.teachers.manual import ManualParams
 from teacher_service.teachers.uniform import FixedParams, RandomParams
 
@@ -53,14 +54,20 @@ class FixedCurriculum(TypedSpec):
     params: FixedParams = Field(default_factory=FixedParams)
 
 
+class CurrotCurriculum(TypedSpec):
+    teacher: Literal["currot"]
+    params: CurrotParams = Field(default_factory=CurrotParams)
+
+
 CurriculumRequest = Annotated[
-    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum, Field(discriminator="teacher")
+    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum | CurrotCurriculum,
+    Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
 
 SPEC_CLASSES: dict[str, type[TypedSpec]] = {
     get_args(spec.model_fields["teacher"].annotation)[0]: spec
-    for spec in (AlpGmmCurriculum, ManualCurriculum, RandomCurriculum, FixedCurriculum)
+    for spec in (AlpGmmCurriculum, ManualCurriculum, RandomCurriculum, FixedCurriculum, CurrotCurriculum)
 }
 
 _ADAPTER: TypeAdapter[CurriculumRequest] = TypeAdapter(CurriculumRequest)

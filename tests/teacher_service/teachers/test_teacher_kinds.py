@@ -18,6 +18,7 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
     "random": {},
     "fixed": {},
+    "currot": {"particles": 40, "update_every": 20, "buffer_size": 60, "candidates": 8, "delta": 0.0},
 }
 
 
@@ -115,7 +116,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
     original = build(kind)
     run_student(original, 130, batch=7)
     original.sample(5)  # handed out, no result yet
-    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1)}
+    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1), "currot": ("fits", 3)}
     if kind in learned:
         entry, least = learned[kind]
         assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"
