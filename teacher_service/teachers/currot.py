@@ -47,6 +47,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 from scipy.special import ndtri
 
 from common.task_space import Task, TaskSpace
@@ -62,6 +63,10 @@ assignments of at most 500 particles to 500 target samples or 2,500 successful t
 
 LENGTHSCALE_SHARE = 0.3
 """The performance model's kernel length scale as a share of the move radius (the reference's choice)."""
+
+NEIGHBOURS = 32
+"""Results the estimate at a point averages over, the nearest (the reference also limits them): at
+this length scale, farther ones weigh next to nothing, and the update costs a tenth."""
 
 MAX_PENDING_FITS = 4
 """Due fits whose starting particles are kept for ``refit_job``; an older one is superseded."""
@@ -146,13 +151,13 @@ def estimate_performance(
     tasks: np.ndarray, performance: np.ndarray, lengthscale: float, points: np.ndarray
 ) -> np.ndarray:
     """Nadaraya-Watson estimate at ``points`` (n, d) from results at ``tasks`` (b, d): a Gaussian-
-    kernel weighted mean, normalised per point, so far from every result it is the nearest one's."""
-    estimates = np.empty(len(points))
-    rows = max(1, 2_000_000 // max(len(tasks), 1))
-    for start in range(0, len(points), rows):
-        logits = -squared_distances(points[start : start + rows], tasks) / (2.0 * lengthscale**2)
-        weights = np.exp(logits - logits.max(axis=1, keepdims=True))
-        estimates[start : start + rows] = (weights @ performance) / weights.sum(axis=1)
+    kernel weighted mean over the ``NEIGHBOURS`` nearest results, normalised per point, so far
+    from every result it is the nearest one's."""
+    count = min(NEIGHBOURS, len(tasks))
+    distances, nearest = (np.reshape(values, (len(points), count)) for values in cKDTree(tasks).query(points, k=count))
+    logits = -(distances**2) / (2.0 * lengthscale**2)
+    weights = np.exp(logits - logits.max(axis=1, keepdims=True))
+    estimates: np.ndarray = np.einsum("nk,nk->n", weights, performance[nearest]) / weights.sum(axis=1)
     return estimates
 
 
