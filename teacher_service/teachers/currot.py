@@ -4,31 +4,34 @@ The curriculum is a cloud of task particles; each task is a particle picked at r
 uniform noise. Every ``update_every`` results the particles move toward a target distribution (by
 default samples of the uniform distribution over the box; optionally the space's hardest task)
 under two constraints: no particle moves further than ``max_move`` (a share of the box's diagonal),
-and a particle the student is estimated to master stays where the estimated performance is at
-least the bar. The estimate is a Nadaraya-Watson (Gaussian kernel) regression over the last
-``buffer_size`` results, with a length scale of 0.3 times the move radius, as in the reference.
+and a particle the student is estimated to master only moves to places where the estimated
+performance stays at or above the bar. The estimate is a Nadaraya-Watson (Gaussian kernel)
+regression over the last ``buffer_size`` results, with a length scale of 0.3 times the move radius,
+as in the reference.
 
-One update, following the reference code (github.com/psclklnk/currot, ``CurrOT`` and
-``SamplingWassersteinInterpolation``): particles are matched one to one to target samples by an
-optimal-transport assignment (``scipy.optimize.linear_sum_assignment`` on squared distances); a
-particle estimated at or above the bar tries ``candidates`` points in the half ball toward its
-target sample (radius: the move limit, or the distance to the target when that is less) and goes
-to the one closest to its target among those estimated at or above the bar, staying put when none
-is. A particle below the bar moves toward a recent task that reached the bar, matched by the same
-assignment, or, when no recent task did, to the best-estimated point in the whole ball around it.
+One update, following the reference code (github.com/psclklnk/currot, ``CurrOT``,
+``WassersteinSuccessBuffer`` and ``SamplingWassersteinInterpolation``): particles are matched one to
+one to target samples by an optimal-transport assignment (``scipy.optimize.linear_sum_assignment``
+on squared distances). A particle estimated at or above the bar tries ``candidates`` points in the
+half ball facing its target sample (radius: the move limit, or the distance to the target when that
+is less) and goes to the one closest to its target among those estimated at or above the bar,
+staying put when none is. A particle below the bar heads for a recent task that reached the bar,
+matched by the same kind of assignment; while no recent task has, for one that did better than
+the window's median (the reference's buffer keeps the better half until the bar is reached).
 
 Where ours differs from the reference, and why:
-- all distances are measured in the box rescaled to [0, 1] per dimension (the reference uses raw
-  units, where a parameter spanning 0.04 next to one spanning 0.89 barely moves);
-- the performance model is fitted to a sliding window of recent results instead of the
-  reference's success buffer (the best-returning or the target-closest successful tasks) plus a
-  buffer of failures, and the movement uses an exact assignment instead of sliced Wasserstein;
-- a particle below the bar walks at most ``max_move`` toward a successful task instead of being
-  replaced by one, so every particle's move is bounded;
-- the success measure: when every result in the window reports ``success``, the estimate is a
-  success rate held to ``success_delta``; otherwise it is the return held to ``delta``. On KUKA a
-  grasp is worth about +10 and a failed episode ends around -2..+2, so the defaults, a return of 5
-  or a success rate of 0.5, both mean "succeeds about half the time".
+- distances are measured in the box rescaled to [0, 1] per dimension (the reference uses raw
+  units, where a parameter spanning 0.04 next to one spanning 0.89 barely counts);
+- the estimate is fitted to a sliding window of recent results, averaging the 32 nearest at each
+  point, instead of the reference's buffer of successful (or, before the bar is reached, best)
+  tasks plus recent failures; the movement uses an exact assignment instead of sliced Wasserstein;
+- a particle below the bar walks at most ``max_move`` toward its matched task instead of being
+  replaced by it, so every particle's move is bounded;
+- the measure: when every result in the window reports ``success``, the estimate is a success
+  rate held to ``success_delta``; otherwise it is the return held to ``delta``. On KUKA a grasp is
+  worth about +10 and a failed episode ends around -2..+2, so the defaults, a return of 5 or a
+  success rate of 0.5, both mean "succeeds about half the time". Other reward scales need their
+  own ``delta`` (rewards in [0, 1]: 0.5).
 
 When it helps: a student that learns nothing from the hardest tasks but can be led there through
 tasks it already half masters, in spaces where the way to the target is not a straight line;
@@ -77,8 +80,8 @@ RECENT_MOVES = 100
 UNKNOWN_SUCCESS = -1.0
 """The history's success column when a result did not say."""
 
-TOWARD_TARGET, TOWARD_SUCCESS, CLIMBING = 0, 1, 2
-WHY = ("toward the target", "toward a success", "climbing the estimate")
+TOWARD_TARGET, TOWARD_SUCCESS, TOWARD_BETTER, STAYING = 0, 1, 2, 3
+WHY = ("toward the target", "toward a success", "toward the better half", "staying")
 """Per-particle reasons for a move, as stored in a fit (codes) and told in ``moves`` (words)."""
 
 
@@ -126,7 +129,7 @@ class CurrotParams(TeacherParams):
 @dataclass(frozen=True)
 class ParticleFit:
     """The output of one update: the new particles (unit coordinates), the estimate at each, and
-    why each moved (``TOWARD_TARGET``, ``TOWARD_SUCCESS`` or ``CLIMBING``)."""
+    why each moved (``TOWARD_TARGET``, ``TOWARD_SUCCESS``, ``TOWARD_BETTER`` or ``STAYING``)."""
 
     index: int
     particles: np.ndarray
@@ -173,11 +176,10 @@ def _assign(sources: np.ndarray, destinations: np.ndarray) -> np.ndarray:
 
 
 def _ball(
-    rng: np.random.Generator, centres: np.ndarray, toward: np.ndarray, radii: np.ndarray, count: int, half: np.ndarray
+    rng: np.random.Generator, centres: np.ndarray, toward: np.ndarray, radii: np.ndarray, count: int
 ) -> np.ndarray:
-    """``count`` points uniform in the ball of radius ``radii[i]`` around each centre, shape
-    (n, count, d), clipped to the unit box; where ``half`` is set, points behind the direction to
-    ``toward`` are mirrored in front of it."""
+    """``count`` points uniform in the half ball of radius ``radii[i]`` around each centre that faces
+    ``toward[i]`` (points behind are mirrored in front), shape (n, count, d), clipped to the unit box."""
     n, dims = centres.shape
     directions = rng.standard_normal((n, count, dims))
     directions /= np.maximum(np.linalg.norm(directions, axis=-1, keepdims=True), 1e-300)
@@ -185,8 +187,7 @@ def _ball(
     heading = toward - centres
     heading /= np.maximum(np.linalg.norm(heading, axis=-1, keepdims=True), 1e-300)
     along = np.einsum("nkd,nd->nk", offsets, heading)
-    mirrored = offsets - 2.0 * np.minimum(along, 0.0)[..., None] * heading[:, None, :]
-    offsets = np.where(half[:, None, None], mirrored, offsets)
+    offsets -= 2.0 * np.minimum(along, 0.0)[..., None] * heading[:, None, :]
     points: np.ndarray = np.clip(centres[:, None, :] + radii[:, None, None] * offsets, 0.0, 1.0)
     return points
 
@@ -209,31 +210,34 @@ def move_particles(
     n, dims = particles.shape
     estimate = functools.partial(estimate_performance, tasks, performance, LENGTHSCALE_SHARE * radius)
     here = estimate(particles)
-    above = here >= bar
     samples = rng.random((n, dims)) if target is None else np.tile(target, (n, 1))
     goals = _assign(particles, samples)
-    distances = np.linalg.norm(goals - particles, axis=-1)
-    ball = _ball(rng, particles, goals, np.where(above, np.minimum(radius, distances), radius), candidates, above)
-    ball = np.concatenate([particles[:, None, :], ball], axis=1)  # staying put is always a candidate
-    ball_estimates = estimate(ball.reshape(-1, dims)).reshape(n, candidates + 1)
-    ball_estimates[:, 0] = here  # the same numbers that decided ``above``, whatever the batching
-
     moved = particles.copy()
-    why = np.full(n, TOWARD_TARGET, dtype=np.int64)
-    to_goal = np.linalg.norm(ball - goals[:, None, :], axis=-1)
-    closest_allowed = np.argmin(np.where(ball_estimates >= bar, to_goal, np.inf), axis=1)
-    moved[above] = ball[above, closest_allowed[above]]
+    why = np.full(n, STAYING, dtype=np.int64)
 
-    below = np.flatnonzero(~above)
-    successes = tasks[performance >= bar]
-    if len(below) and len(successes):
-        heading = _assign(particles[below], successes) - particles[below]
+    above = np.flatnonzero(here >= bar)
+    if len(above):
+        start, goal = particles[above], goals[above]
+        radii = np.minimum(radius, np.linalg.norm(goal - start, axis=-1))
+        ball = np.concatenate([start[:, None, :], _ball(rng, start, goal, radii, candidates)], axis=1)
+        ball_estimates = estimate(ball.reshape(-1, dims)).reshape(len(above), candidates + 1)
+        ball_estimates[:, 0] = here[above]  # staying put is always allowed, whatever the batching
+        to_goal = np.linalg.norm(ball - goal[:, None, :], axis=-1)
+        closest_allowed = np.argmin(np.where(ball_estimates >= bar, to_goal, np.inf), axis=1)
+        moved[above] = ball[np.arange(len(above)), closest_allowed]
+        why[above] = TOWARD_TARGET
+
+    below = np.flatnonzero(here < bar)
+    reached = performance >= bar
+    if np.any(reached):
+        better, code = tasks[reached], TOWARD_SUCCESS
+    else:
+        better, code = tasks[performance > np.median(performance)], TOWARD_BETTER
+    if len(below) and len(better):
+        heading = _assign(particles[below], better) - particles[below]
         length = np.linalg.norm(heading, axis=-1, keepdims=True)
         moved[below] = particles[below] + heading * np.minimum(1.0, radius / np.maximum(length, 1e-300))
-        why[below] = TOWARD_SUCCESS
-    elif len(below):
-        moved[below] = ball[below, np.argmax(ball_estimates[below], axis=1)]  # ties keep the particle put
-        why[below] = CLIMBING
+        why[below] = code
     return ParticleFit(index, moved, estimate(moved), why, measure, bar)
 
 

@@ -13,8 +13,9 @@ import pytest
 from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
 from teacher_service.teachers.currot import (
-    CLIMBING,
     LENGTHSCALE_SHARE,
+    STAYING,
+    TOWARD_BETTER,
     TOWARD_SUCCESS,
     TOWARD_TARGET,
     CurrotTeacher,
@@ -109,24 +110,30 @@ def test_particles_move_toward_the_target_at_most_max_move_and_never_out_of_the_
     assert set(move) == {"at_results", "fit", "from", "to", "longest_move", "why"}
 
 
-def test_without_any_success_particles_only_climb_the_estimate() -> None:
+def test_before_any_result_reaches_the_bar_particles_head_for_the_better_half() -> None:
     teacher = currot(target="hardest")
     (job,) = [
         job
         for task in teacher.sample(SMALL["update_every"])
-        # always below the bar, better toward a = 1
+        # always below the bar of 5, better toward a = 1
         if (job := teacher.update(EpisodeResult(task, task["a"] - 2.0))) is not None
     ]
     before = particles(teacher)
     fitted = job.run()
-    assert np.all(fitted.why == CLIMBING), "no result reached the bar, so no particle heads for the target or a success"
-    window = teacher.history(0)
-    radius = teacher.radius
-    estimate = estimate_performance(
-        window[:, :2], window[:, 2], LENGTHSCALE_SHARE * radius, np.vstack([before, fitted.particles])
-    )
-    assert np.all(estimate[len(before) :] >= estimate[: len(before)] - 1e-12)
-    assert np.linalg.norm(fitted.particles - before, axis=-1).max() <= radius + 1e-12
+    assert np.all(fitted.why == TOWARD_BETTER), "no result reached the bar: no particle heads for the target"
+    moves = fitted.particles - before
+    assert np.linalg.norm(moves, axis=-1).max() <= teacher.radius + 1e-12
+    assert moves[:, 0].mean() > 0.5 * teacher.radius, "the cloud moves toward the better returns at a = 1"
+
+
+def test_a_flat_window_below_the_bar_leaves_the_particles_where_they_are() -> None:
+    teacher = currot()
+    (job,) = [
+        job for task in teacher.sample(SMALL["update_every"]) if (job := teacher.update(EpisodeResult(task, 0.0)))
+    ]
+    before = particles(teacher)
+    fitted = job.run()
+    assert np.all(fitted.why == STAYING) and fitted.particles.tobytes() == before.tobytes()
 
 
 def test_the_estimate_uses_success_when_every_result_reports_it() -> None:
