@@ -61,15 +61,15 @@ from teacher_service.teachers.params import FiniteFloat, TeacherParams
 MAX_PARTICLES = 500
 MAX_BUFFER = 2000
 MAX_CANDIDATES = 64
-"""Together these bound one update: at most 500 x 65 points estimated against 2,000 results, and
-assignments of at most 500 particles to 500 target samples or 2,500 successful tasks."""
+"""Together these bound one update: at most 500 x 65 points estimated from their nearest among
+2,000 results, and assignments of at most 500 particles to at most 2,000 tasks."""
 
 LENGTHSCALE_SHARE = 0.3
 """The performance model's kernel length scale as a share of the move radius (the reference's choice)."""
 
 NEIGHBOURS = 32
 """Results the estimate at a point averages over, the nearest (the reference also limits them): at
-this length scale, farther ones weigh next to nothing, and the update costs a tenth."""
+this length scale farther ones weigh next to nothing, and an update takes about a third of the time."""
 
 MAX_PENDING_FITS = 4
 """Due fits whose starting particles are kept for ``refit_job``; an older one is superseded."""
@@ -94,7 +94,8 @@ class CurrotParams(TeacherParams):
     """Recent results the performance estimate of an update is fitted to."""
     max_move: float = Field(default=0.05, gt=0.0, le=1.0)
     """Longest move of a particle in one update, as a share of the diagonal of the box rescaled to
-    [0, 1] per dimension (the authors: 5% of the diagonal)."""
+    [0, 1] per dimension. The authors' TeachMyAgent setting passes 5% of the diagonal as its epsilon,
+    which the reference code applies as a bound on the squared move, so its moves can be longer."""
     delta: FiniteFloat = Field(default=5.0, ge=-1e9, le=1e9)
     """The bar on the estimated return. KUKA: a grasp is worth about +10 and a failure ends around
     -2..+2, so 5 means succeeding about half the time."""
