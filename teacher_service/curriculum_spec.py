@@ -17,6 +17,7 @@ from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
 from teacher_service.teachers.adr import AdrParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
+from teacher_service.teachers.currot import CurrotParams
 from teacher_service.teachers.manual import ManualParams
 from teacher_service.teachers.self_paced import SelfPacedParams
 from teacher_service.teachers.uniform import FixedParams, RandomParams
@@ -65,8 +66,19 @@ class SelfPacedCurriculum(TypedSpec):
     params: SelfPacedParams = Field(default_factory=SelfPacedParams)
 
 
+class CurrotCurriculum(TypedSpec):
+    teacher: Literal["currot"]
+    params: CurrotParams = Field(default_factory=CurrotParams)
+
+
 CurriculumRequest = Annotated[
-    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum | AdrCurriculum | SelfPacedCurriculum,
+    AlpGmmCurriculum
+    | ManualCurriculum
+    | RandomCurriculum
+    | FixedCurriculum
+    | AdrCurriculum
+    | SelfPacedCurriculum
+    | CurrotCurriculum,
     Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
@@ -80,6 +92,7 @@ SPEC_CLASSES: dict[str, type[TypedSpec]] = {
         FixedCurriculum,
         AdrCurriculum,
         SelfPacedCurriculum,
+        CurrotCurriculum,
     )
 }
 

@@ -14,6 +14,7 @@ from common.task_space import TaskSpace
 from teacher_service.teachers.adr import AdrTeacher
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.currot import CurrotTeacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.self_paced import SelfPacedTeacher
@@ -29,6 +30,7 @@ TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
             FixedTeacher,
             AdrTeacher,
             SelfPacedTeacher,
+            CurrotTeacher,
         )
     }
 )

@@ -308,12 +308,12 @@ def assert_state_drawn(page: Page, teacher: dict[str, Any], x: str, y: str) -> N
     assert len(space.get("ellipse", [])) == len(teacher.get("components", []))
     assert len(space.get("region", [])) == len(teacher.get("regions", []))
     for trace, region in zip(space.get("region", []), teacher.get("regions", []), strict=True):
-        assert (trace["x"], trace["y"]) == pytest.approx(rectangle(region["low"], region["high"]))
+        xs, ys = rectangle(region["low"], region["high"])
+        assert trace["x"] == pytest.approx(xs) and trace["y"] == pytest.approx(ys)
     if "bounds" in teacher:
         bounds = space["bounds"][0]
-        assert (bounds["x"], bounds["y"]) == pytest.approx(
-            rectangle(teacher["bounds"]["low"], teacher["bounds"]["high"])
-        )
+        xs, ys = rectangle(teacher["bounds"]["low"], teacher["bounds"]["high"])
+        assert bounds["x"] == pytest.approx(xs) and bounds["y"] == pytest.approx(ys)
     if teacher.get("particles"):
         drawn = space["particles"][0]
         assert drawn["x"] == pytest.approx([p[x] for p in teacher["particles"]])

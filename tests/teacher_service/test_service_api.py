@@ -341,7 +341,7 @@ def test_openapi_documents_every_endpoint_and_error(service):
 
 def test_openapi_shows_each_teacher_kinds_parameters_with_bounds_defaults_and_docs(service):
     schemas = httpx.get(f"{service.url}/openapi.json").json()["components"]["schemas"]
-    for kind in ("AlpGmm", "Manual", "Random", "Fixed"):
+    for kind in ("AlpGmm", "Manual", "Random", "Fixed", "Currot"):
         assert schemas[f"{kind}Curriculum"]["properties"]["params"]["$ref"] == f"#/components/schemas/{kind}Params"
     fit_rate = schemas["AlpGmmParams"]["properties"]["fit_rate"]
     assert (fit_rate["minimum"], fit_rate["maximum"], fit_rate["default"]) == (2, 2000, 250)
@@ -350,7 +350,7 @@ def test_openapi_shows_each_teacher_kinds_parameters_with_bounds_defaults_and_do
     assert (window["minimum"], window["maximum"], window["default"]) == (1, 10_000, 100)
     every_field = [
         (kind, name, field)
-        for kind in ("AlpGmmParams", "ManualParams", "FixedParams")
+        for kind in ("AlpGmmParams", "ManualParams", "FixedParams", "CurrotParams")
         for name, field in schemas[kind]["properties"].items()
     ]
     assert all(field.get("description") for _, _, field in every_field), every_field

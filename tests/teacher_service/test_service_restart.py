@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 
 from common.schemas import ParameterSpec
 from common.task_space import KUKA_TASK_SPACE
@@ -23,7 +24,11 @@ from teacher_service.teachers import EpisodeResult, FitJob, make_teacher
 
 NAME = "crash"
 SEED = 11
-PARAMS = {"fit_rate": 16, "min_components": 2, "max_components": 4}
+KIND_PARAMS: dict[str, dict[str, Any]] = {
+    "alp-gmm": {"fit_rate": 16, "min_components": 2, "max_components": 4},
+    "currot": {"particles": 30, "update_every": 16, "buffer_size": 32, "candidates": 8},
+}
+"""Per kind, parameters that make a fit fall due every 16 results."""
 
 
 def _reward(params: dict[str, float], index: int) -> float:
@@ -37,9 +42,9 @@ def _as_json(value: Any) -> Any:
 class Mirror:
     """Drives the service and an in-process reference teacher through the same history."""
 
-    def __init__(self, api: httpx.Client) -> None:
+    def __init__(self, api: httpx.Client, kind: str) -> None:
         self.api = api
-        self.reference = make_teacher("alp-gmm", KUKA_TASK_SPACE, SEED, PARAMS)
+        self.reference = make_teacher(kind, KUKA_TASK_SPACE, SEED, KIND_PARAMS[kind])
         self.due: list[FitJob] = []
         self.reported: list[dict[str, Any]] = []
 
@@ -73,18 +78,19 @@ class Mirror:
         return counters
 
 
-def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes):
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, kind):
     space = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
     service = ServiceProcess(tmp_path / "teacher.db").start()
     try:
         api = httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0)
         assert (
             api.put(
-                f"/curricula/{NAME}", json={"teacher": "alp-gmm", "space": space, "params": PARAMS, "seed": SEED}
+                f"/curricula/{NAME}", json={"teacher": kind, "space": space, "params": KIND_PARAMS[kind], "seed": SEED}
             ).status_code
             == 201
         )
-        mirror = Mirror(api)
+        mirror = Mirror(api, kind)
         mirror.report(mirror.draw(8))
         mirror.report(mirror.draw(8))  # result 16: fit 0 falls due (and starts the fit process)
         drawn_during_fit = mirror.draw(8)

@@ -20,6 +20,7 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "fixed": {},
     "adr": {"queue_length": 3, "reward_range": [-1.0, 1.0]},
     "self-paced": {"update_every": 20, "reward_range": [-1.0, 1.0]},
+    "currot": {"particles": 40, "update_every": 20, "buffer_size": 60, "candidates": 8, "delta": 0.0},
 }
 
 
@@ -117,7 +118,13 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
     original = build(kind)
     run_student(original, 130, batch=7)
     original.sample(5)  # handed out, no result yet
-    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1), "adr": ("widened", 3), "self-paced": ("updates", 3)}
+    learned = {
+        "alp-gmm": ("fits", 3),
+        "manual": ("lesson", 1),
+        "adr": ("widened", 3),
+        "self-paced": ("updates", 3),
+        "currot": ("fits", 3),
+    }
     if kind in learned:
         entry, least = learned[kind]
         assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"
