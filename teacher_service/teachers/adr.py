@@ -68,7 +68,7 @@ class AdrParams(TeacherParams):
     """Widen a boundary when its queue's mean performance is at least this."""
     lower_threshold: float = Field(default=0.2, ge=0.0, le=1.0)
     """Narrow a boundary when its queue's mean performance is at most this."""
-    reward_range: RewardRange = Field(default_factory=lambda: list(KUKA_REWARD_RANGE))
+    reward_range: RewardRange = list(KUKA_REWARD_RANGE)
     """Returns mapped onto [0, 1] for results without ``success`` (KUKA default: [0, 10])."""
 
     @model_validator(mode="after")

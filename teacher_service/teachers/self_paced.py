@@ -103,7 +103,7 @@ class SelfPacedParams(TeacherParams):
     """Most KL divergence between successive Gaussians (TeachMyAgent's benchmark: 0.1)."""
     update_every: int = Field(default=100, ge=10, le=1000)
     """Results between two updates; each update sees only the results since the last one."""
-    reward_range: RewardRange = Field(default_factory=lambda: list(KUKA_REWARD_RANGE))
+    reward_range: RewardRange = list(KUKA_REWARD_RANGE)
     """Returns mapped onto [0, 1] for results without ``success`` (KUKA default: [0, 10])."""
 
     @model_validator(mode="after")
