@@ -12,7 +12,7 @@ from typing import Any
 
 from common.task_space import TaskSpace
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
-from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher, TeacherFactory
+from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher, TeacherFactory
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
 
@@ -29,4 +29,4 @@ def make_teacher(kind: str, space: TaskSpace, seed: int, params: Mapping[str, An
     return factory(space, seed, {} if params is None else params)
 
 
-__all__ = ["TEACHER_KINDS", "EpisodeResult", "FitJob", "Teacher", "make_teacher"]
+__all__ = ["TEACHER_KINDS", "BuildJob", "EpisodeResult", "FitJob", "Teacher", "make_teacher"]

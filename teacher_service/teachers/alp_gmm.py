@@ -19,6 +19,7 @@ one spanning 0.89 barely counts), and rewards can be mapped onto [0, 1] from a k
 from __future__ import annotations
 
 import functools
+import math
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -30,7 +31,7 @@ from scipy.special import ndtri
 from sklearn.mixture import GaussianMixture
 
 from common.task_space import Task, TaskSpace
-from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import as_bool, as_float, as_int, as_range, parse_params, store
 
@@ -124,43 +125,128 @@ def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: i
     return MixtureFit(index, best.weights_, best.means_, best.covariances_, aics)
 
 
-class _NearestReward:
-    """Exact nearest earlier task and its reward. Older tasks sit in a k-d tree that is rebuilt
-    only every ``buffer_size`` additions; the newest are scanned directly."""
+TREE_GROWTH = 512
+"""Once the history is large, the k-d tree is rebuilt every 1/TREE_GROWTH of its rows rather than
+every ``buffer_size``: a build over 1M tasks takes about half a second, and each must fit between
+two checkpoints, while the tasks scanned directly stay a few thousand."""
+
+
+def _build_tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree over ``points`` (a view of rows that never change); scipy builds it without
+    holding the GIL, so a thread can do it while the event loop answers requests."""
+    return cKDTree(points)
+
+
+@dataclass
+class _TreeBuild:
+    size: int
+    job: BuildJob
+    tree: cKDTree | None = None
+    handed_out: bool = False
+
+
+class _History:
+    """Every result as a row (task features, reward, ALP), and the exact nearest earlier task.
+
+    Older tasks sit in a k-d tree, newer ones are scanned directly. Which tasks the tree holds
+    depends only on the number of rows: at each checkpoint (every ``buffer_size`` rows, or every
+    1/TREE_GROWTH of the rows once that is more) a tree over all rows so far is requested as a
+    ``BuildJob``, and it replaces the current tree at the next checkpoint. The build has a whole
+    interval to run off the event loop, and whoever built it (a thread, or this class itself when
+    the output has not come back in time, as in a replay), the switch happens at the same row.
+    Ties between equidistant tasks go to the tree, and within the scan to the earliest row, so the
+    answers never depend on timing.
+    """
 
     def __init__(self, dims: int, buffer_size: int) -> None:
+        self.dims = dims
+        self._buffer_size = buffer_size
+        self._rows = np.empty((2 * buffer_size, dims + 2))
+        self.size = 0
         self._tree: cKDTree | None = None
-        self._tree_points = np.empty((0, dims))
-        self._tree_rewards = np.empty(0)
-        self._recent_points = np.empty((buffer_size, dims))
-        self._recent_rewards = np.empty(buffer_size)
-        self._recent = 0
+        self._tree_size = 0
+        self._next_checkpoint = buffer_size
+        self._build: _TreeBuild | None = None
 
-    def __len__(self) -> int:
-        return len(self._tree_rewards) + self._recent
+    def rows(self, start: int) -> np.ndarray:
+        rows: np.ndarray = self._rows[start : self.size].copy()
+        return rows
+
+    def column(self, column: int, start: int) -> np.ndarray:
+        values: np.ndarray = self._rows[start : self.size, column].copy()
+        return values
+
+    def fit_points(self, start: int, stop: int) -> np.ndarray:
+        """(task features, ALP) of rows ``start`` to ``stop``: the points a mixture is fitted to."""
+        rows = self._rows[start:stop]
+        return np.concatenate([rows[:, : self.dims], rows[:, self.dims + 1 :]], axis=1)
 
     def reward_near(self, point: np.ndarray) -> float:
         distance, reward = np.inf, np.nan
         if self._tree is not None:
             # One point, so scalars; the stubs also allow the arrays a batch of points would give.
             distance, index = cast("tuple[float, np.intp]", self._tree.query(point))
-            reward = self._tree_rewards[index]
-        if self._recent:
-            distances = np.linalg.norm(self._recent_points[: self._recent] - point, axis=1)
-            nearest = int(np.argmin(distances))
-            if distances[nearest] < distance:
-                reward = self._recent_rewards[nearest]
+            reward = self._rows[index, self.dims]
+        if self.size > self._tree_size:
+            offsets = self._rows[self._tree_size : self.size, : self.dims] - point
+            squared = np.einsum("ij,ij->i", offsets, offsets)
+            nearest = int(np.argmin(squared))
+            if math.sqrt(squared[nearest]) < distance:
+                reward = self._rows[self._tree_size + nearest, self.dims]
         return float(reward)
 
-    def add(self, point: np.ndarray, reward: float) -> None:
-        self._recent_points[self._recent] = point
-        self._recent_rewards[self._recent] = reward
-        self._recent += 1
-        if self._recent == len(self._recent_rewards):
-            self._tree_points = np.vstack([self._tree_points, self._recent_points])
-            self._tree_rewards = np.concatenate([self._tree_rewards, self._recent_rewards])
-            self._tree = cKDTree(self._tree_points)
-            self._recent = 0
+    def add(self, features: np.ndarray, reward: float, alp: float) -> None:
+        if self.size == len(self._rows):
+            grown = np.empty((2 * len(self._rows), self.dims + 2))
+            grown[: self.size] = self._rows[: self.size]
+            self._rows = grown  # a build still running holds the old array, whose rows are the same
+        self._rows[self.size, : self.dims] = features
+        self._rows[self.size, self.dims :] = (reward, alp)
+        self.size += 1
+        if self.size == self._next_checkpoint:
+            if self._build is not None:
+                self._switch_to(self._build)
+            self._request_build()
+
+    def pending_build(self) -> BuildJob | None:
+        if self._build is None or self._build.handed_out:
+            return None
+        self._build.handed_out = True
+        return self._build.job
+
+    def adopt(self, job: BuildJob, tree: cKDTree) -> None:
+        if self._build is not None and self._build.job is job:
+            self._build.tree = tree
+
+    def restore(self, rows: np.ndarray) -> None:
+        """Take ``rows`` as the history, with the tree and pending build a live run had there."""
+        if rows.ndim != 2 or rows.shape[1] != self.dims + 2:
+            raise ValueError(f"history rows must have {self.dims + 2} columns, got shape {rows.shape}")
+        self._rows = np.empty((max(2 * len(rows), 2 * self._buffer_size), self.dims + 2))
+        self._rows[: len(rows)] = rows
+        self.size = len(rows)
+        passed = [0, 0]  # the last two checkpoints at or before the last row
+        while self._next_checkpoint <= self.size:
+            passed = [passed[1], self._next_checkpoint]
+            self._next_checkpoint = self._advance(self._next_checkpoint)
+        if passed[0]:
+            self._tree, self._tree_size = _build_tree(self._rows[: passed[0], : self.dims]), passed[0]
+        if passed[1]:
+            self._build = _TreeBuild(passed[1], self._tree_job(passed[1], self._next_checkpoint))
+
+    def _advance(self, checkpoint: int) -> int:
+        return checkpoint + max(self._buffer_size, checkpoint // TREE_GROWTH)
+
+    def _request_build(self) -> None:
+        self._next_checkpoint = self._advance(self.size)
+        self._build = _TreeBuild(self.size, self._tree_job(self.size, self._next_checkpoint))
+
+    def _tree_job(self, size: int, needed_at: int) -> BuildJob:
+        return BuildJob(needed_at, functools.partial(_build_tree, self._rows[:size, : self.dims]))
+
+    def _switch_to(self, build: _TreeBuild) -> None:
+        self._tree = build.tree if build.tree is not None else build.job.run()
+        self._tree_size = build.size
 
 
 @dataclass(frozen=True)
@@ -225,8 +311,7 @@ class AlpGmmTeacher(Teacher):
                 self._target = space.to_array(space.hardest())
             except ValueError as error:
                 raise ValueError(f"target_task_ratio needs a hardest value for every parameter: {error}") from None
-        self._nearest = _NearestReward(len(space), self.params.buffer_size)
-        self._fit_points: deque[np.ndarray] = deque(maxlen=self.params.fit_rate)
+        self._history = _History(len(space), self.params.buffer_size)
         self._sampler: _Sampler | None = None
         self.fits_requested = 0
         self.fits_installed = 0
@@ -263,23 +348,36 @@ class AlpGmmTeacher(Teacher):
         features = self._to_features(self.space.to_array(result.task))
         reward = self._scaled(result.reward)
         alp = 0.0
-        if len(self._nearest) >= MIN_HISTORY_FOR_ALP:
-            alp = abs(reward - self._nearest.reward_near(features))
-        self._nearest.add(features, reward)
-        self._fit_points.append(np.append(features, alp))
+        if self._history.size >= MIN_HISTORY_FOR_ALP:
+            alp = abs(reward - self._history.reward_near(features))
+        self._history.add(features, reward, alp)
         if self.results_seen % self.params.fit_rate:
             return None
-        index = self.fits_requested
         self.fits_requested += 1
+        return self.refit_job(self.fits_requested - 1)
+
+    def refit_job(self, index: int) -> FitJob:
+        """Fit ``index`` sees the ``fit_rate`` results before it fell due, all still in the history."""
+        if not 0 <= index < self.fits_requested:
+            raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
+        rate = self.params.fit_rate
         run = functools.partial(
             fit_mixture,
             index,
-            np.array(self._fit_points),
+            self._history.fit_points(index * rate, (index + 1) * rate),
             range(self.params.min_components, self.params.max_components + 1),
             self.params.nb_em_init,
             indexed_seed(self.seed, FIT_STREAM, index),
         )
         return FitJob(index=index, run=run)
+
+    def build_job(self) -> BuildJob | None:
+        return self._history.pending_build()
+
+    def adopt_build(self, job: BuildJob, output: Any) -> None:
+        if not isinstance(output, cKDTree):
+            raise TypeError(f"expected the cKDTree a BuildJob returns, got {type(output).__name__}")
+        self._history.adopt(job, output)
 
     def install(self, fitted: MixtureFit) -> None:
         if not isinstance(fitted, MixtureFit):
@@ -289,10 +387,62 @@ class AlpGmmTeacher(Teacher):
         self._sampler = _Sampler.prepare(fitted)
         self.fits_installed += 1
 
+    def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
+        return {
+            "index": fitted.index,
+            "weights": fitted.weights.tolist(),
+            "means": fitted.means.tolist(),
+            "covariances": fitted.covariances.tolist(),
+            "aic_by_components": [[k, aic] for k, aic in fitted.aic_by_components.items()],
+        }
+
+    def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
+        width = len(self.space) + 1
+        weights = np.array(data["weights"], dtype=np.float64)
+        means = np.array(data["means"], dtype=np.float64)
+        covariances = np.array(data["covariances"], dtype=np.float64)
+        components = len(weights)
+        if means.shape != (components, width) or covariances.shape != (components, width, width):
+            raise ValueError(
+                f"a mixture of {components} components over {width} coordinates needs means of shape "
+                f"{(components, width)} and covariances of shape {(components, width, width)}, "
+                f"got {means.shape} and {covariances.shape}"
+            )
+        aics = {int(k): float(aic) for k, aic in data["aic_by_components"]}
+        return MixtureFit(int(data["index"]), weights, means, covariances, aics)
+
+    @property
+    def history_size(self) -> int:
+        return self._history.size
+
+    def history(self, start: int) -> np.ndarray:
+        """One row per result: its task features, its (scaled) reward and its ALP."""
+        return self._history.rows(start)
+
+    def _export(self) -> dict[str, Any]:
+        return {
+            "history_rows": self._history.size,
+            "fits_requested": self.fits_requested,
+            "fits_installed": self.fits_installed,
+            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
+            "origins": dict(self.origins),
+            "recent_origins": list(self._recent_origins),
+        }
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        if len(history) != state["history_rows"]:
+            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
+        self._history.restore(history)
+        self.fits_requested = int(state["fits_requested"])
+        self.fits_installed = int(state["fits_installed"])
+        self._sampler = None if state["model"] is None else _Sampler.prepare(self.import_fit(state["model"]))
+        self.origins = Counter({str(origin): int(count) for origin, count in state["origins"].items()})
+        self._recent_origins.extend(str(origin) for origin in state["recent_origins"])
+
     @property
     def recent_alps(self) -> np.ndarray:
         """ALP of the last ``fit_rate`` results: the data the next fit will see."""
-        return np.array([point[-1] for point in self._fit_points])
+        return self._history.column(-1, max(self._history.size - self.params.fit_rate, 0))
 
     def _to_features(self, tasks: np.ndarray) -> np.ndarray:
         return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)

@@ -3,14 +3,24 @@
 Teachers are pure: no I/O, no threads, no clocks. Everything random comes from generators keyed
 by the teacher's seed and a counter, so replaying the same results and sample counts rebuilds the
 same teacher exactly. Expensive model fits are split out as ``FitJob`` objects so a service can
-run them off its request path and ``install`` the result later.
+run them off its request path and ``install`` the result later; so are rebuilds of search
+structures (``BuildJob``), which a teacher adopts at a fixed result count whoever ran them.
 
-Rebuilding a teacher from its history: create it with the same kind, space, seed and params, then
-for each stored result in order call ``skip(n)`` with the number of tasks handed out before it,
-followed by ``observe(result)``; finish with ``skip`` for the tasks handed out since the last
-result. The next ``sample`` then returns what the live teacher would have returned, except that a
-live service may have sampled a few tasks before a due fit was installed, where the replay
-installs it at once.
+Saving and restoring a teacher: ``snapshot()`` exports its state as JSON-ready data (counters,
+the installed model, per-task bookkeeping; no generator objects, since draws are addressed by
+counters), and ``history(start)`` the rows of its append-only history from ``start`` on (float64,
+kept out of the snapshot so that saving one does not rewrite the whole history). A fresh teacher
+of the same kind, space, seed and params given both by ``restore`` is the same teacher: fed the
+same results, it draws the same tasks. ``export_fit``/``import_fit`` turn a fit's output into
+plain data and back, so a stored fit is installed without running it again, and ``refit_job``
+rebuilds the job of a fit that was due but never finished.
+
+Rebuilding a teacher from its results instead: create it with the same kind, space, seed and
+params (or restore a snapshot), then for each later stored result in order call ``skip(n)`` with
+the number of tasks handed out before it, followed by ``observe(result)``; finish with ``skip`` for
+the tasks handed out since the last result. The next ``sample`` then returns what the live teacher
+would have returned, except that a live service may have sampled a few tasks before a due fit was
+installed, where the replay installs it at once.
 """
 
 from __future__ import annotations
@@ -21,6 +31,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from common.task_space import Task, TaskSpace
 
@@ -45,6 +57,17 @@ class FitJob:
     ``Teacher.install``, in the order the jobs were returned; a failed one is simply left out."""
 
     index: int
+    run: Callable[[], Any]
+
+
+@dataclass(frozen=True)
+class BuildJob:
+    """A rebuild of a search structure that the teacher switches to once it has seen
+    ``needed_at`` results. ``run()`` is pure and spends its time outside the GIL, so a service runs
+    it on a thread and hands the output to ``Teacher.adopt_build``; a teacher that reaches
+    ``needed_at`` without it runs the job itself, so the answers never depend on timing."""
+
+    needed_at: int
     run: Callable[[], Any]
 
 
@@ -97,6 +120,58 @@ class Teacher(ABC):
         """Adopt the output of a ``FitJob.run()``. Teachers without models have no jobs."""
         raise RuntimeError(f"{self.kind} teacher has no model to install")
 
+    def export_fit(self, fitted: Any) -> dict[str, Any]:
+        """A fit's output as JSON-ready data, exact to the bit, for ``import_fit``."""
+        raise RuntimeError(f"{self.kind} teacher has no model to export")
+
+    def import_fit(self, data: Mapping[str, Any]) -> Any:
+        """The fit output that ``export_fit`` turned into ``data``, ready for ``install``."""
+        raise RuntimeError(f"{self.kind} teacher has no model to import")
+
+    def refit_job(self, index: int) -> FitJob:
+        """The job ``update`` returned for fit ``index``, built again from the teacher's history
+        (for a fit that fell due before a snapshot and was lost with the process)."""
+        raise RuntimeError(f"{self.kind} teacher has no fits")
+
+    def build_job(self) -> BuildJob | None:
+        """The pending search-structure rebuild, handed out once; ``None`` when there is none."""
+        return None
+
+    def adopt_build(self, job: BuildJob, output: Any) -> None:
+        """Keep the output of ``job.run()`` for when the teacher reaches ``job.needed_at``; the
+        output of a job the teacher no longer waits for is dropped."""
+        raise RuntimeError(f"{self.kind} teacher has no builds")
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything but the history, as JSON-ready data; ``restore`` reads it back."""
+        return {
+            "kind": self.kind,
+            "tasks_sampled": self.tasks_sampled,
+            "results_seen": self.results_seen,
+            "state": self._export(),
+        }
+
+    @property
+    def history_size(self) -> int:
+        """Rows in the append-only history (see ``history``)."""
+        return 0
+
+    def history(self, start: int) -> np.ndarray:
+        """History rows ``start`` onwards, float64, shape (rows, width); rows never change once
+        written, so a store can append them in chunks."""
+        return np.empty((0, 0))
+
+    def restore(self, snapshot: Mapping[str, Any], history: np.ndarray) -> None:
+        """Become the teacher that ``snapshot()`` described, with ``history`` its rows up to then.
+        Only on a fresh teacher built with the same kind, space, seed and params."""
+        if snapshot["kind"] != self.kind:
+            raise ValueError(f"a {snapshot['kind']} snapshot cannot restore a {self.kind} teacher")
+        if self.tasks_sampled or self.results_seen:
+            raise RuntimeError("restore needs a fresh teacher")
+        self._import(snapshot["state"], history)
+        self.tasks_sampled = int(snapshot["tasks_sampled"])
+        self.results_seen = int(snapshot["results_seen"])
+
     def observe(self, result: EpisodeResult) -> None:
         """Record a result and run any fit it triggers right here (for tests and replays)."""
         job = self.update(result)
@@ -125,6 +200,14 @@ class Teacher(ABC):
     @abstractmethod
     def _describe(self) -> dict[str, Any]:
         """The kind's own JSON-ready state entries."""
+
+    @abstractmethod
+    def _export(self) -> dict[str, Any]:
+        """The kind's own state beyond the counters, JSON-ready, for ``snapshot``."""
+
+    @abstractmethod
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        """Adopt what ``_export`` returned, and the history rows up to it."""
 
 
 TeacherFactory = Callable[[TaskSpace, int, Mapping[str, Any]], Teacher]

@@ -15,6 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.params import as_float, as_int, as_task, in_space, parse_params, store
@@ -140,3 +142,22 @@ class ManualTeacher(Teacher):
             "stale_results": self.stale_results,
             "advanced_at_results": list(self.advanced_at),
         }
+
+    def _export(self) -> dict[str, Any]:
+        return {
+            "lesson": self.lesson,
+            "lesson_rewards": list(self.lesson_rewards),
+            "lesson_episodes": self.lesson_episodes,
+            "stale_results": self.stale_results,
+            "advanced_at": list(self.advanced_at),
+        }
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        lesson = int(state["lesson"])
+        if not 0 <= lesson < len(self.lessons):
+            raise ValueError(f"lesson {lesson} is not in this plan of {len(self.lessons)} lessons")
+        self.lesson = lesson
+        self.lesson_rewards.extend(float(reward) for reward in state["lesson_rewards"])
+        self.lesson_episodes = int(state["lesson_episodes"])
+        self.stale_results = int(state["stale_results"])
+        self.advanced_at = [int(count) for count in state["advanced_at"]]

@@ -6,6 +6,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
@@ -35,6 +37,12 @@ class RandomTeacher(Teacher):
 
     def _describe(self) -> dict[str, Any]:
         return {}
+
+    def _export(self) -> dict[str, Any]:
+        return {}
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        """Nothing beyond the counters: task ``i`` depends on the seed and ``i`` only."""
 
 
 @dataclass(frozen=True)
@@ -70,3 +78,9 @@ class FixedTeacher(Teacher):
 
     def _describe(self) -> dict[str, Any]:
         return {"point": dict(self.point)}
+
+    def _export(self) -> dict[str, Any]:
+        return {}
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        """Nothing beyond the counters: the task never changes."""

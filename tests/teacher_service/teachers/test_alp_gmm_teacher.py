@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers.alp_gmm import AlpGmmTeacher, MixtureFit, fit_mixture
+from teacher_service.teachers import alp_gmm as alp_gmm_module
+from teacher_service.teachers.alp_gmm import TREE_GROWTH, AlpGmmTeacher, MixtureFit, fit_mixture
 
 SKEWED = TaskSpace(
     [
@@ -257,3 +260,85 @@ def test_gmm_tasks_go_where_reward_changes() -> None:
     best = max(components, key=lambda component: component["mean_alp"])
     assert best["mean"]["rnd_obj_x"] < 0.3 and best["mean"]["jp2"] > 1.0
     assert best["sampling_probability"] > 0.5
+
+
+def test_a_stored_fit_installs_bit_for_bit() -> None:
+    teacher = alp_gmm(fit_rate=30, max_components=3)
+    rng = np.random.default_rng(2)
+    jobs = [teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random()))) for _ in range(30)]
+    fitted = jobs[-1].run()
+    restored = teacher.import_fit(json.loads(json.dumps(teacher.export_fit(fitted))))
+    for name in ("weights", "means", "covariances"):
+        assert getattr(restored, name).tobytes() == getattr(fitted, name).tobytes()
+    assert (restored.index, restored.aic_by_components) == (fitted.index, fitted.aic_by_components)
+    with pytest.raises(ValueError, match="needs means of shape"):
+        teacher.import_fit({**teacher.export_fit(fitted), "means": [[0.0, 1.0]]})
+
+
+def test_a_fit_lost_before_it_was_installed_is_rebuilt_from_the_history() -> None:
+    teacher = alp_gmm(fit_rate=25, max_components=3)
+    rng = np.random.default_rng(4)
+    due = [job for _ in range(60) if (job := teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random()))))]
+    assert [job.index for job in due] == [0, 1]
+    for job in due:
+        again = teacher.refit_job(job.index)
+        assert again.run.args[1].tobytes() == job.run.args[1].tobytes()
+        assert again.run.args[2:] == job.run.args[2:]
+    with pytest.raises(ValueError, match="fit 2 has not fallen due"):
+        teacher.refit_job(2)
+
+
+def repeated_hardest_task_run(teacher: AlpGmmTeacher, results: int, adopt: bool) -> list[float]:
+    """Half the tasks are the same hardest task, so nearest-neighbour ties are everywhere. With
+    ``adopt`` every tree build is run as soon as it is handed out and given back, as a service does."""
+    rewards = np.random.default_rng(8).random(results)
+    alps = []
+    for reward in rewards:
+        teacher.observe(EpisodeResult(teacher.sample(1)[0], float(reward)))
+        alps.append(float(teacher.recent_alps[-1]))
+        if adopt and (job := teacher.build_job()) is not None:
+            teacher.adopt_build(job, job.run())
+    return alps
+
+
+def test_tree_switches_happen_at_fixed_counts_whoever_builds_the_tree(monkeypatch: pytest.MonkeyPatch) -> None:
+    params = {"fit_rate": 50, "max_components": 3, "buffer_size": 8, "target_task_ratio": 0.5}
+    built: list[int] = []
+
+    def counting_build(points: np.ndarray) -> Any:
+        built.append(len(points))
+        return cKDTree(points)
+
+    monkeypatch.setattr(alp_gmm_module, "_build_tree", counting_build)
+    in_background = alp_gmm(KUKA_TASK_SPACE, 5, **params)
+    handed_out = repeated_hardest_task_run(in_background, 300, adopt=True)
+    background_builds, built[:] = list(built), []
+    inline = alp_gmm(KUKA_TASK_SPACE, 5, **params)
+    assert repeated_hardest_task_run(inline, 300, adopt=False) == handed_out
+    assert built == background_builds[:-1], "without the outputs, the teacher builds each tree itself when due"
+    assert background_builds == list(range(8, 300, 8)), "one tree per checkpoint, over every row so far"
+    assert in_background.sample(20) == inline.sample(20)
+
+    late = alp_gmm(KUKA_TASK_SPACE, 5, **params)
+    repeated_hardest_task_run(late, 20, adopt=False)
+    job = late.build_job()
+    assert job is not None and job.needed_at == 24 and late.build_job() is None
+    repeated_hardest_task_run(late, 10, adopt=False)  # passes 24: built inline, and a new job is pending
+    late.adopt_build(job, cKDTree(np.zeros((1, len(KUKA_TASK_SPACE)))))  # too late: dropped
+    fresh = alp_gmm(KUKA_TASK_SPACE, 5, **params)
+    repeated_hardest_task_run(fresh, 20, adopt=False)
+    repeated_hardest_task_run(fresh, 10, adopt=False)
+    assert late.recent_alps.tolist() == fresh.recent_alps.tolist()
+    assert repeated_hardest_task_run(late, 40, adopt=False) == repeated_hardest_task_run(fresh, 40, adopt=False)
+
+
+def test_the_tree_is_rebuilt_less_often_as_the_history_grows() -> None:
+    teacher = alp_gmm(KUKA_TASK_SPACE, 0, fit_rate=10_000, buffer_size=100)
+    rows = np.random.default_rng(1).random((60_000, len(KUKA_TASK_SPACE) + 2))
+    snapshot = teacher.snapshot()
+    snapshot["state"]["history_rows"] = snapshot["results_seen"] = len(rows)
+    teacher.restore(snapshot, rows)
+    job = teacher.build_job()
+    assert job is not None
+    assert job.needed_at - 60_000 <= max(100, 60_000 // TREE_GROWTH)
+    assert job.run().n < 60_000

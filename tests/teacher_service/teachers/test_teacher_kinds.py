@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import numpy as np
 import pytest
 from scripted_student import run_student
 
@@ -95,6 +96,48 @@ def test_replaying_the_history_rebuilds_the_teacher(kind: str) -> None:
 
     assert rebuilt.state() == live.state()
     assert rebuilt.sample(30) == live.sample(30)
+
+
+def restored_copy(teacher: Teacher) -> Teacher:
+    """A fresh teacher restored from ``teacher``'s snapshot, the snapshot passed through JSON text and
+    the history split in two chunks, as a store keeps them."""
+    snapshot = json.loads(json.dumps(teacher.snapshot(), allow_nan=False))
+    half = teacher.history_size // 2
+    history = teacher.history(0)
+    chunks = np.concatenate([history[:half], teacher.history(half)]) if teacher.history_size else history
+    restored = build(teacher.kind)
+    restored.restore(snapshot, chunks)
+    return restored
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
+    original = build(kind)
+    run_student(original, 130, batch=7)
+    original.sample(5)  # handed out, no result yet
+    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1)}
+    if kind in learned:
+        entry, least = learned[kind]
+        assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"
+
+    restored = restored_copy(original)
+    assert restored.state() == original.state()
+    assert run_student(restored, 150, batch=4) == run_student(original, 150, batch=4)
+    assert restored.sample(40) == original.sample(40)
+    assert restored.state() == original.state()
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
+def test_a_snapshot_restores_only_a_fresh_teacher_of_its_kind(kind: str) -> None:
+    teacher = build(kind)
+    run_student(teacher, 10)
+    used = build(kind)
+    used.sample(1)
+    with pytest.raises(RuntimeError, match="fresh teacher"):
+        used.restore(teacher.snapshot(), teacher.history(0))
+    other = build("fixed" if kind != "fixed" else "random")
+    with pytest.raises(ValueError, match=f"a {kind} snapshot cannot restore"):
+        other.restore(teacher.snapshot(), teacher.history(0))
 
 
 @pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
