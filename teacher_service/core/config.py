@@ -16,7 +16,7 @@ class Settings(BaseSettings):
     """Interface to bind; the default keeps the service private to this machine."""
     port: int = Field(default=8000, ge=0, le=65535)
     db: Path = Path("runs/teacher.db")
-    """SQLite database holding every curriculum's history; a restart replays it."""
+    """SQLite database holding every curriculum's history; a restart loads its newest snapshots."""
     teacher_token: SecretStr | None = None
     """When set, every PUT and POST must carry ``Authorization: Bearer <token>``."""
     max_body_bytes: int = Field(default=1 << 20, ge=1024)
@@ -25,6 +25,8 @@ class Settings(BaseSettings):
     """FULL syncs every commit to disk (survives power loss); NORMAL survives process crashes only."""
     recent_results: int = Field(default=2000, ge=0)
     """Results per curriculum kept in memory for ``/state``."""
+    snapshot_every: int = Field(default=1000, ge=1, le=1_000_000)
+    """Results between two stored teacher snapshots: a restart replays at most about this many."""
     rate_window_s: float = Field(default=10.0, gt=0)
     """Window over which ``results_per_second`` is measured."""
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"

@@ -220,7 +220,7 @@ class _History:
 
     def restore(self, rows: np.ndarray) -> None:
         """Take ``rows`` as the history, with the tree and pending build a live run had there."""
-        if rows.ndim != 2 or rows.shape[1] != self.dims + 2:
+        if len(rows) and (rows.ndim != 2 or rows.shape[1] != self.dims + 2):
             raise ValueError(f"history rows must have {self.dims + 2} columns, got shape {rows.shape}")
         self._rows = np.empty((max(2 * len(rows), 2 * self._buffer_size), self.dims + 2))
         self._rows[: len(rows)] = rows
