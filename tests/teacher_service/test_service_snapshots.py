@@ -234,3 +234,94 @@ def test_a_restart_installs_stored_models_and_leaves_failed_fits_out(
         mirror.draw(20)
     finally:
         service.stop()
+
+
+VERSION_1_SCHEMA = """
+CREATE TABLE curricula (
+    id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, spec TEXT NOT NULL, created_at REAL NOT NULL
+);
+CREATE TABLE tasks (
+    curriculum_id INTEGER NOT NULL REFERENCES curricula(id), task_index INTEGER NOT NULL, params TEXT NOT NULL,
+    results_seen INTEGER NOT NULL, issued_at REAL NOT NULL, PRIMARY KEY (curriculum_id, task_index)
+) WITHOUT ROWID;
+CREATE TABLE results (
+    seq INTEGER PRIMARY KEY, curriculum_id INTEGER NOT NULL, task_index INTEGER NOT NULL, reward REAL NOT NULL,
+    success INTEGER, length INTEGER, received_at REAL NOT NULL, UNIQUE (curriculum_id, task_index),
+    FOREIGN KEY (curriculum_id, task_index) REFERENCES tasks(curriculum_id, task_index)
+);
+CREATE TABLE fits (
+    curriculum_id INTEGER NOT NULL REFERENCES curricula(id), fit_index INTEGER NOT NULL,
+    tasks_sampled INTEGER NOT NULL, results_seen INTEGER NOT NULL, started_at REAL NOT NULL,
+    finished_at REAL NOT NULL, error TEXT, PRIMARY KEY (curriculum_id, fit_index)
+) WITHOUT ROWID;
+PRAGMA user_version = 1;
+"""
+"""The schema the service wrote before snapshots: no fit models, no snapshots, no history chunks."""
+
+
+def _version_1_database(path: Path, name: str, teacher: Teacher, batches: int) -> None:
+    """What a version-1 service would have stored for ``teacher`` after ``batches`` rounds of eight
+    tasks and their results, fits installed as they fell due; three more tasks are left outstanding."""
+    spec = {"teacher": teacher.kind, "space": SPACE, "params": KIND_PARAMS[teacher.kind], "seed": SEED}
+    with sqlite3.connect(path) as connection:
+        connection.executescript(VERSION_1_SCHEMA)
+        connection.execute("INSERT INTO curricula VALUES (1, ?, ?, 1.0)", (name, json.dumps(spec)))
+        reported = 0
+        for batch in range(batches + 1):
+            first = teacher.tasks_sampled
+            tasks = teacher.sample(8 if batch < batches else 3)
+            connection.executemany(
+                "INSERT INTO tasks VALUES (1, ?, ?, ?, ?)",
+                [(first + i, json.dumps(task), teacher.results_seen, 2.0 + batch) for i, task in enumerate(tasks)],
+            )
+            if batch == batches:
+                break
+            for i, task in enumerate(tasks):
+                reward = _reward(task, reported)
+                connection.execute(
+                    "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at)"
+                    " VALUES (1, ?, ?, NULL, 50, ?)",
+                    (first + i, reward, 2.5 + batch),
+                )
+                reported += 1
+                if (job := teacher.update(EpisodeResult(task, reward, None, 50))) is not None:
+                    teacher.install(job.run())
+                    connection.execute(
+                        "INSERT INTO fits VALUES (1, ?, ?, ?, ?, ?, NULL)",
+                        (job.index, teacher.tasks_sampled, teacher.results_seen, 3.0 + job.index, 3.5 + job.index),
+                    )
+
+
+def test_a_version_1_database_is_migrated_replayed_once_and_then_restarts_from_a_snapshot(
+    tmp_path: Path, api_for: Callable[[ServiceProcess], httpx.Client], fit_processes: Any
+) -> None:
+    db = tmp_path / "teacher.db"
+    mirror_reference = make_teacher("alp-gmm", KUKA_TASK_SPACE, SEED, KIND_PARAMS["alp-gmm"])
+    _version_1_database(db, "old", mirror_reference, batches=7)  # 56 results: fits at 16, 32 and 48
+    service = ServiceProcess(db).start()
+    try:
+        mirror = Mirror(api_for(service), "old", "alp-gmm")
+        mirror.reference = mirror_reference
+        with sqlite3.connect(db) as connection:
+            assert connection.execute("PRAGMA user_version").fetchone()[0] == 2
+            models = connection.execute("SELECT fit_index, model IS NOT NULL FROM fits ORDER BY fit_index").fetchall()
+            assert models == [(0, 1), (1, 1), (2, 1)], "the first start stores the models of the fits it ran"
+            assert connection.execute("SELECT results_seen FROM snapshots").fetchall() == [(56,)]
+        state = mirror.state()
+        assert state["teacher"] == _as_json(mirror.reference.state())
+        assert [(f["index"], f["started_at"], f["replayed"]) for f in state["fits"]] == [
+            (0, 3.0, True),
+            (1, 4.0, True),
+            (2, 5.0, True),
+        ]
+        assert mirror.counters()["tasks_outstanding"] == 3
+
+        service.kill()
+        _drop_covered_results(db, "old")
+        service.start()
+        assert fit_processes(service.pid) == []
+        assert mirror.state()["teacher"] == _as_json(mirror.reference.state())
+        mirror.report(mirror.draw(8))
+        assert mirror.state()["teacher"] == _as_json(mirror.reference.state())
+    finally:
+        service.stop()
