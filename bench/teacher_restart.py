@@ -141,7 +141,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--db", type=Path, default=Path("runs/restart-bench.db"))
     parser.add_argument("--results", type=int, default=1_000_000)
-    parser.add_argument("--fit-rate", type=int, default=20_000)
+    parser.add_argument("--fit-rate", type=int, default=2_000, help="at most 2,000 where the params are bounded")
     parser.add_argument("--max-components", type=int, default=4)
     parser.add_argument("--batch", type=int, default=64)
     parser.add_argument(
