@@ -147,7 +147,10 @@ class FitEvent(BaseModel):
     started_at: float
     finished_at: float
     duration_s: float
-    replayed: bool = Field(description="Ran while rebuilding the teacher at startup.")
+    replayed: bool = Field(
+        description="Came back with a restart: installed from its stored model, or run again because the"
+        " service died before recording it."
+    )
     error: str | None = None
 
 

@@ -2,24 +2,38 @@
 
 Threading model: a teacher is only ever touched on the event loop thread. Requests sample from it
 and the store's commit callbacks feed it results, both on the loop; a due fit runs in the fit
-process as a pure job, and its output comes back to the loop to be installed. So no teacher needs
-a lock, sampling always uses the last installed model, and a refit never holds up a request.
+process as a pure job, and its output comes back to the loop to be installed; a due rebuild of a
+teacher's search structure (``BuildJob``) runs on a thread, since it holds no GIL, and its output
+comes back to the loop too. So no teacher needs a lock, sampling always uses the last installed
+model, and neither a refit nor a rebuild holds up a request.
 
-What is stored lets a restart rebuild the exact live state: each task row carries how many results
-the teacher had learned from when it was drawn, and each fit row how many tasks and results it
-had seen when it was installed. The replay feeds results back in their stored order, drawing (and
-dropping) tasks and installing fits at the same points, so the rebuilt teacher has the same model,
-the same counters and the same per-task bookkeeping, and draws the same next tasks.
+What is stored lets a restart rebuild the exact live state in bounded time. Each task row carries
+how many results the teacher had learned from when it was drawn, and each fit row how many tasks
+and results it had seen when it was installed, and the fitted model. Every ``snapshot_every``
+results, once those results are committed, the curriculum stores a snapshot: the teacher's
+exported state, the new rows of its history, its counters and outstanding tasks, and the fits
+that were due and not back. A restart restores the newest snapshot, then replays only the results
+stored after it, in order, drawing (and dropping) tasks and installing fits from their stored
+models at the same points; so the rebuilt teacher has the same model, counters and per-task
+bookkeeping, and draws the same next tasks, and no installed fit is ever run again. A fit that
+was due but never recorded (the process died first) runs again once, through the fit process,
+as it would have live. The snapshot goes into the group commit after the results it follows: the
+teacher learns only committed results, so its state after them exists only then; a crash between
+the two costs nothing but a longer replay from the previous snapshot. The first start on a
+database without snapshots (schema version 1) replays everything and runs the fits whose models
+were never stored, then stores a snapshot, as every start that replayed anything does.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, ThreadPoolExecutor
 from typing import Any
 
 from tqdm import tqdm
@@ -48,8 +62,10 @@ from teacher_service.store import (
     StoredCurriculum,
     StoredFit,
     StoredTask,
+    TeacherSnapshot,
+    snapshot_statements,
 )
-from teacher_service.teachers import EpisodeResult, FitJob, Teacher, make_teacher
+from teacher_service.teachers import BuildJob, EpisodeResult, FitJob, Teacher, make_teacher
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +100,7 @@ class Curriculum:
         created_at: float,
         store: Store,
         fits: FitRunner,
+        builds: Executor,
         metrics: ServiceMetrics,
         settings: Settings,
     ) -> None:
@@ -114,6 +131,17 @@ class Curriculum:
         self.last_fit_at: float | None = None
         self._store = store
         self._fits = fits
+        self._builds = builds
+        self._fits_waiting: set[int] = set()
+        """Fits submitted whose outcome has not come back; a snapshot lists them."""
+        self._lost_fits: list[FitJob] = []
+        """Fits a restart found due and never recorded; they run once the service has started."""
+        self._last_result_index: int | None = None
+        self._snapshot_every = settings.snapshot_every
+        self._snapshot_at = 0
+        """Results learned at the last stored snapshot."""
+        self._history_stored = 0
+        self._snapshot_queued = False
         self._tasks_counter = metrics.tasks_issued.labels(name)
         self._expired_tasks_counter = metrics.tasks_expired.labels(name)
         self._expired_results_counter = metrics.results.labels(name, "expired")
@@ -208,9 +236,21 @@ class Curriculum:
             self._writing.difference_update(claimed)
             for index, item in claimed.items():
                 self.outstanding.pop(index, None)
-                job = self._learn(index, tasks[index], item.reward, item.success, item.length, received_at)
+                job = self._learn(index, tasks[index], item.reward, item.success, item.length)
+                self.recent_results.append(
+                    RecentResult(
+                        task_id=self.task_id(index),
+                        params=tasks[index],
+                        reward=item.reward,
+                        success=item.success,
+                        length=item.length,
+                        received_at=received_at,
+                    )
+                )
                 if job is not None:
-                    self._submit_fit(job)
+                    self._submit_fit(job, replayed=False)
+            self._start_build()
+            self._snapshot_if_due()
             self._count_arrivals(received_at, len(claimed))
             self._accepted_counter.inc(len(claimed))
 
@@ -232,36 +272,28 @@ class Curriculum:
             self.tasks_expired += expired
             self._expired_tasks_counter.inc(expired)
 
-    def _learn(
-        self, index: int, task: Task, reward: float, success: bool | None, length: int | None, received_at: float
-    ) -> FitJob | None:
+    def _learn(self, index: int, task: Task, reward: float, success: bool | None, length: int | None) -> FitJob | None:
         job = self.teacher.update(EpisodeResult(task, reward, success, length))
         self.results_received += 1
-        self.recent_results.append(
-            RecentResult(
-                task_id=self.task_id(index),
-                params=task,
-                reward=reward,
-                success=success,
-                length=length,
-                received_at=received_at,
-            )
-        )
+        self._last_result_index = index
         return job
 
-    def _submit_fit(self, job: FitJob) -> None:
+    def _submit_fit(self, job: FitJob, replayed: bool) -> None:
         self.fits_pending += 1
         self._fits_pending_gauge.inc()
-        self._fits.submit(self.name, job, self._install_live)
+        self._fits_waiting.add(job.index)
+        self._fits.submit(self.name, job, functools.partial(self._install_live, replayed=replayed))
 
-    def _install_live(self, outcome: FitOutcome) -> None:
+    def _install_live(self, outcome: FitOutcome, replayed: bool) -> None:
         self.fits_pending -= 1
         self._fits_pending_gauge.dec()
-        self._install(outcome, replayed=False)
-        self._store.write_later([(INSERT_FIT, [self._fit_row(outcome)])])
+        self._fits_waiting.discard(outcome.index)
+        error = self._install(outcome, replayed)
+        self._store.write_later([(INSERT_FIT, [self._fit_row(outcome, error)])])
 
-    def _install(self, outcome: FitOutcome, replayed: bool) -> None:
-        """Adopt a fit's model; a failed fit or install is recorded and the previous model stays."""
+    def _install(self, outcome: FitOutcome, replayed: bool) -> str | None:
+        """Adopt a fit's model; a failed fit or install is recorded and the previous model stays.
+        Returns the error, if any."""
         error = outcome.error
         if error is None:
             try:
@@ -276,18 +308,11 @@ class Curriculum:
             self._fit_errors_counter.inc()
         self.fits_completed += 1
         self.last_fit_at = outcome.finished_at
-        self.fit_events.append(
-            FitEvent(
-                index=outcome.index,
-                started_at=outcome.started_at,
-                finished_at=outcome.finished_at,
-                duration_s=outcome.finished_at - outcome.started_at,
-                replayed=replayed,
-                error=error,
-            )
-        )
+        self.fit_events.append(_fit_event(outcome.index, outcome.started_at, outcome.finished_at, replayed, error))
+        return error
 
-    def _fit_row(self, outcome: FitOutcome) -> tuple[Any, ...]:
+    def _fit_row(self, outcome: FitOutcome, error: str | None) -> tuple[Any, ...]:
+        model = None if error is not None else json.dumps(self.teacher.export_fit(outcome.output))
         return (
             self.id,
             outcome.index,
@@ -295,7 +320,52 @@ class Curriculum:
             self.teacher.results_seen,
             outcome.started_at,
             outcome.finished_at,
-            outcome.error,
+            error,
+            model,
+        )
+
+    def _start_build(self) -> None:
+        """Run the teacher's due search-structure rebuild on a thread; the output comes back to the loop."""
+        job = self.teacher.build_job()
+        if job is not None:
+            future = asyncio.get_running_loop().run_in_executor(self._builds, job.run)
+            future.add_done_callback(functools.partial(self._adopt_build, job))
+
+    def _adopt_build(self, job: BuildJob, future: asyncio.Future[Any]) -> None:
+        if future.cancelled():
+            return
+        if (error := future.exception()) is not None:
+            log.error("curriculum %r: a background build failed (%r); the teacher builds it when due", self.name, error)
+            return
+        self.teacher.adopt_build(job, future.result())
+
+    def _snapshot_if_due(self) -> None:
+        if self._snapshot_queued or self.teacher.results_seen - self._snapshot_at < self._snapshot_every:
+            return
+        snapshot = self._snapshot()
+        self._snapshot_queued = True
+
+        def stored() -> None:
+            self._snapshot_queued = False
+            self._snapshot_at = snapshot.results_seen
+            self._history_stored = snapshot.history_from + len(snapshot.history)
+
+        def not_stored() -> None:
+            self._snapshot_queued = False
+
+        self._store.write_later(snapshot_statements(self.id, snapshot), on_commit=stored, on_abort=not_stored)
+
+    def _snapshot(self) -> TeacherSnapshot:
+        return TeacherSnapshot(
+            results_seen=self.teacher.results_seen,
+            last_task_index=self._last_result_index,
+            tasks_issued=self.tasks_issued,
+            issued_through=self.issued_through,
+            fits_waiting=sorted(self._fits_waiting),
+            teacher=self.teacher.snapshot(),
+            history=self.teacher.history(self._history_stored),
+            history_from=self._history_stored,
+            taken_at=time.time(),
         )
 
     def _count_arrivals(self, now: float, count: int) -> None:
@@ -335,50 +405,120 @@ class Curriculum:
             recent_results=results,
         )
 
-    def replay(self) -> None:
-        """Rebuild the teacher from the store (see the module docstring); runs fits in place."""
+    def restore(self) -> None:
+        """Rebuild the curriculum from its newest snapshot and the results stored after it (see the
+        module docstring); before the service starts."""
         store, teacher = self._store, self.teacher
-        tasks = store.tasks(self.id)
-        self.tasks_issued = len(tasks)
-        self.issued_through = tasks[-1].index + 1 if tasks else 0
-        recorded_fits = {fit.index: fit for fit in store.fits(self.id)}
-        due: deque[FitJob] = deque()
-        drawn_before = _tasks_drawn_before(tasks)
+        stored = store.snapshot(self.id)
+        after_seq = tasks_issued = issued_through = 0
+        waiting: list[int] = []
+        if stored is not None:
+            teacher.restore(stored.teacher, store.history(self.id, stored.history_rows))
+            after_seq, tasks_issued, issued_through = stored.last_seq, stored.tasks_issued, stored.issued_through
+            waiting, self._history_stored = stored.fits_waiting, stored.history_rows
+        later_tasks = store.tasks_from(self.id, issued_through)
+        self.tasks_issued = tasks_issued + len(later_tasks)
+        self.issued_through = later_tasks[-1].index + 1 if later_tasks else issued_through
+        self.results_received = self._snapshot_at = teacher.results_seen
+        recorded = {fit.index: fit for fit in store.fits_since(self.id, teacher.results_seen)}
+        due = deque(teacher.refit_job(index) for index in waiting)
+        drawn_before = _tasks_drawn_before(later_tasks)
+        models_found: list[tuple[Any, ...]] = []
 
         def draw_to(count: int) -> None:
             if count > teacher.tasks_sampled:
                 teacher.skip(count - teacher.tasks_sampled)
 
         def install_recorded(results_applied: int) -> None:
-            while due and (fit := recorded_fits.get(due[0].index)) and fit.results_seen <= results_applied:
+            while due and (fit := recorded.get(due[0].index)) and fit.results_seen <= results_applied:
                 draw_to(fit.tasks_sampled)
-                self._install(_rerun(due.popleft(), fit), replayed=True)
+                self._install_stored(due.popleft(), fit, models_found)
 
-        results = store.results(self.id)
-        total = store.result_count(self.id)
-        for applied, result in enumerate(
-            tqdm(results, total=total, desc=f"replaying {self.name}", unit="result", disable=None, leave=False)
+        total = store.result_count(self.id, after_seq)
+        results = store.results(self.id, after_seq)
+        for result in tqdm(
+            results, total=total, desc=f"replaying {self.name}", unit="result", disable=None, leave=False
         ):
-            install_recorded(applied)
-            draw_to(drawn_before(applied))
-            job = self._learn(
-                result.task_index, result.task, result.reward, result.success, result.length, result.received_at
-            )
+            install_recorded(teacher.results_seen)
+            draw_to(drawn_before(teacher.results_seen))
+            job = self._learn(result.task_index, result.task, result.reward, result.success, result.length)
             if job is not None:
                 due.append(job)
-        install_recorded(total)
+        install_recorded(teacher.results_seen)
         draw_to(self.issued_through)
-        unrecorded = []
-        while due:
-            outcome = run_fit(due.popleft())
-            self._install(outcome, replayed=True)
-            unrecorded.append(self._fit_row(outcome))
-        if unrecorded:
-            store.write_now([(INSERT_FIT, unrecorded)])
         for index, task, issued_at in store.outstanding_tasks(self.id, self.issued_through - self._task_window):
             self.outstanding[index] = task
             self._awaiting.append((index, issued_at))
         self._expire(time.time())
+        for job in due:  # never recorded: the process died first
+            self._lost_fits.append(job)
+            self._fits_waiting.add(job.index)
+        self._restore_reports(models_found)
+        if total or models_found:
+            snapshot = self._snapshot()
+            store.write_now([(INSERT_FIT, models_found), *snapshot_statements(self.id, snapshot)])
+            self._snapshot_at, self._history_stored = snapshot.results_seen, teacher.history_size
+
+    def _install_stored(self, job: FitJob, fit: StoredFit, models_found: list[tuple[Any, ...]]) -> None:
+        """Install a recorded fit from its stored model; one stored without a model (by a version-1
+        service) runs again here, and its model is stored for next time."""
+        if fit.error is not None:
+            return
+        try:
+            if fit.model is not None:
+                self.teacher.install(self.teacher.import_fit(json.loads(fit.model)))
+                return
+            outcome = _rerun(job, fit)
+            error = outcome.error
+            if error is None:
+                self.teacher.install(outcome.output)
+        except Exception as exception:
+            log.exception("curriculum %r: installing stored fit %d failed", self.name, fit.index)
+            error = f"install failed: {type(exception).__name__}: {exception}"
+        model = None if error is not None else json.dumps(self.teacher.export_fit(outcome.output))
+        models_found.append(
+            (self.id, fit.index, fit.tasks_sampled, fit.results_seen, fit.started_at, fit.finished_at, error, model)
+        )
+
+    def _restore_reports(self, models_found: list[tuple[Any, ...]]) -> None:
+        """What the API reports about the past, read from the store rather than replayed."""
+        store = self._store
+        errors = {row[1]: row[6] for row in models_found}
+        for fit in store.recent_fits(self.id, FIT_HISTORY):
+            error = errors.get(fit.index, fit.error)
+            self.fit_events.append(_fit_event(fit.index, fit.started_at, fit.finished_at, True, error))
+        self.fits_completed = store.fit_count(self.id)
+        self.last_fit_at = self.fit_events[-1].finished_at if self.fit_events else None
+        for result in store.recent_results(self.id, self.recent_results.maxlen or 0):
+            self.recent_results.append(
+                RecentResult(
+                    task_id=self.task_id(result.task_index),
+                    params=result.task,
+                    reward=result.reward,
+                    success=result.success,
+                    length=result.length,
+                    received_at=result.received_at,
+                )
+            )
+
+    def resume(self) -> None:
+        """Hand the fits a restart lost, and a pending rebuild, to the background; on the event loop."""
+        for job in self._lost_fits:
+            self._fits_waiting.discard(job.index)
+            self._submit_fit(job, replayed=True)
+        self._lost_fits.clear()
+        self._start_build()
+
+
+def _fit_event(index: int, started_at: float, finished_at: float, replayed: bool, error: str | None) -> FitEvent:
+    return FitEvent(
+        index=index,
+        started_at=started_at,
+        finished_at=finished_at,
+        duration_s=finished_at - started_at,
+        replayed=replayed,
+        error=error,
+    )
 
 
 def _rerun(job: FitJob, recorded: StoredFit) -> FitOutcome:
@@ -417,29 +557,36 @@ class CurriculumRegistry:
         self._metrics = metrics
         self._settings = settings
         self._fits = FitRunner(settings.fit_processes, settings.fit_timeout_s, metrics)
+        self._builds = ThreadPoolExecutor(max_workers=1, thread_name_prefix="teacher-builds")
         self._curricula: dict[str, Curriculum] = {}
 
     def restore(self) -> None:
         """Rebuild every stored curriculum; call before ``start``."""
         for stored in self._store.curricula():
+            started = time.perf_counter()
             curriculum = self._build(stored)
-            curriculum.replay()
+            curriculum.restore()
             self._curricula[stored.name] = curriculum
             log.info(
-                "restored curriculum %r: %d tasks, %d results, %d fits",
+                "restored curriculum %r in %.2f s: %d tasks, %d results, %d fits",
                 stored.name,
+                time.perf_counter() - started,
                 curriculum.tasks_issued,
                 curriculum.results_received,
                 curriculum.fits_completed,
             )
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Start writing and fitting on ``loop``, the running loop."""
         self._store.start(loop)
         self._fits.start(loop)
+        for curriculum in self._curricula.values():
+            curriculum.resume()
 
     def close(self) -> None:
         self._fits.close()
         self._store.close()
+        self._builds.shutdown(wait=False, cancel_futures=True)
 
     @property
     def fits_stopped(self) -> str | None:
@@ -490,6 +637,7 @@ class CurriculumRegistry:
             stored.created_at,
             self._store,
             self._fits,
+            self._builds,
             self._metrics,
             self._settings,
         )

@@ -1,4 +1,4 @@
-"""SQLite persistence for curricula, issued tasks and accepted results.
+"""SQLite persistence for curricula, issued tasks, accepted results, fits and teacher snapshots.
 
 Every write is committed before the request that made it is answered. Writes are group-committed
 on the event loop: whatever the loop queued while handling one round of ready requests goes into
@@ -7,6 +7,13 @@ it. (A writer thread was measured and rejected: each SQLite call hands the GIL b
 a busy event loop, and the waits swamp the commits.) Writes complete, and their ``on_commit``
 callbacks run, in the order they were submitted: the teachers see results in exactly the order
 they are stored, which is the order a replay feeds them back.
+
+What a restart reads (schema version 2): per curriculum, its newest snapshot (one row: the
+teacher's exported state, the service's counters, and the sequence
+number of the last result it had learned), the teacher's append-only history as chunks of float64
+rows written with the snapshots, and only the tasks, results and fits stored after the snapshot.
+Fit rows carry the fitted model, so no installed fit is ever computed twice. A version-1 database
+gains the new tables and columns in place; its first start replays its whole history once.
 """
 
 from __future__ import annotations
@@ -20,12 +27,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from common.task_space import Task
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 1
-_SCHEMA = """
+SCHEMA_VERSION = 2
+_SCHEMA_V1 = """
 CREATE TABLE curricula (
     id INTEGER PRIMARY KEY,
     name TEXT NOT NULL UNIQUE,
@@ -62,16 +71,53 @@ CREATE TABLE fits (
     PRIMARY KEY (curriculum_id, fit_index)
 ) WITHOUT ROWID;
 """
+_MIGRATE_V1_TO_V2 = """
+ALTER TABLE fits ADD COLUMN model TEXT;
+CREATE INDEX results_by_curriculum ON results (curriculum_id, seq);
+CREATE TABLE snapshots (
+    curriculum_id INTEGER PRIMARY KEY REFERENCES curricula(id),
+    results_seen INTEGER NOT NULL,
+    last_seq INTEGER NOT NULL,
+    tasks_issued INTEGER NOT NULL,
+    issued_through INTEGER NOT NULL,
+    fits_waiting TEXT NOT NULL,
+    history_rows INTEGER NOT NULL,
+    teacher TEXT NOT NULL,
+    taken_at REAL NOT NULL
+);
+CREATE TABLE history_chunks (
+    curriculum_id INTEGER NOT NULL REFERENCES curricula(id),
+    first_row INTEGER NOT NULL,
+    row_count INTEGER NOT NULL,
+    width INTEGER NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (curriculum_id, first_row)
+);
+"""
+_MIGRATIONS = {0: _SCHEMA_V1, 1: _MIGRATE_V1_TO_V2}
+"""The script that takes a database from each version to the next."""
+
+HISTORY_CHUNK_ROWS = 65_536
+"""Most history rows in one chunk, so the first snapshot of a long replay is not one huge blob."""
 
 INSERT_CURRICULUM = "INSERT INTO curricula (id, name, spec, created_at) VALUES (?, ?, ?, ?)"
 INSERT_TASK = "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
 INSERT_RESULT = (
     "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at) VALUES (?, ?, ?, ?, ?, ?)"
 )
-INSERT_FIT = (  # REPLACE: a replay may record again a fit whose live row was written out of order
+INSERT_FIT = (  # REPLACE: a restart records again a fit it ran because the live row was missing or had no model
     "INSERT OR REPLACE INTO fits"
-    " (curriculum_id, fit_index, tasks_sampled, results_seen, started_at, finished_at, error)"
-    " VALUES (?, ?, ?, ?, ?, ?, ?)"
+    " (curriculum_id, fit_index, tasks_sampled, results_seen, started_at, finished_at, error, model)"
+    " VALUES (?, ?, ?, ?, ?, ?, ?, ?)"
+)
+_PUT_SNAPSHOT = (  # last_seq: the result the teacher learned last; NULL, so refused, if it is not stored
+    "INSERT OR REPLACE INTO snapshots (curriculum_id, results_seen, last_seq, tasks_issued, issued_through,"
+    " fits_waiting, history_rows, teacher, taken_at)"
+    " VALUES (?1, ?2, CASE WHEN ?2 = 0 THEN 0"
+    " ELSE (SELECT seq FROM results WHERE curriculum_id = ?1 AND task_index = ?3) END, ?4, ?5, ?6, ?7, ?8, ?9)"
+)
+_PUT_HISTORY_CHUNK = (
+    "INSERT OR REPLACE INTO history_chunks (curriculum_id, first_row, row_count, width, data) VALUES (?, ?, ?, ?, ?)"
 )
 
 Statements = list[tuple[str, list[tuple[Any, ...]]]]
@@ -99,6 +145,7 @@ class StoredTask:
 
 @dataclass(frozen=True)
 class StoredResult:
+    seq: int
     task_index: int
     task: Task
     reward: float
@@ -116,6 +163,77 @@ class StoredFit:
     started_at: float
     finished_at: float
     error: str | None
+    model: str | None = None
+    """The fitted model as ``Teacher.export_fit`` JSON; None for a failed fit, or one stored by a
+    version-1 service."""
+
+
+@dataclass(frozen=True)
+class TeacherSnapshot:
+    """A curriculum's state after its teacher had learned ``results_seen`` results."""
+
+    results_seen: int
+    last_task_index: int | None
+    """Task answered by the last of those results; the restart replays the results stored after it."""
+    tasks_issued: int
+    issued_through: int
+    """One past the highest task index stored by then; tasks from here on were issued later."""
+    fits_waiting: list[int]
+    """Fits that had fallen due and not come back."""
+    teacher: dict[str, Any]
+    history: np.ndarray
+    """The teacher's history rows not yet stored, the first of them row ``history_from``."""
+    history_from: int
+    taken_at: float
+
+
+@dataclass(frozen=True)
+class StoredSnapshot:
+    results_seen: int
+    last_seq: int
+    tasks_issued: int
+    issued_through: int
+    fits_waiting: list[int]
+    history_rows: int
+    teacher: dict[str, Any]
+
+
+def snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> Statements:
+    """The write that stores ``snapshot``: it replaces the curriculum's previous one, and appends the
+    new history rows, atomically, so the chunks always end where the stored snapshot does."""
+    rows = np.ascontiguousarray(snapshot.history, dtype="<f8")
+    width = rows.shape[1] if rows.ndim == 2 else 0
+    chunks = [
+        (curriculum_id, snapshot.history_from + start, len(piece), width, piece.tobytes())
+        for start in range(0, len(rows), HISTORY_CHUNK_ROWS)
+        if len(piece := rows[start : start + HISTORY_CHUNK_ROWS])
+    ]
+    row = (
+        curriculum_id,
+        snapshot.results_seen,
+        snapshot.last_task_index,
+        snapshot.tasks_issued,
+        snapshot.issued_through,
+        json.dumps(snapshot.fits_waiting),
+        snapshot.history_from + len(rows),
+        json.dumps(snapshot.teacher),
+        snapshot.taken_at,
+    )
+    return [(_PUT_HISTORY_CHUNK, chunks), (_PUT_SNAPSHOT, [row])]
+
+
+_SELECT_RESULTS = (
+    "SELECT r.seq, r.task_index, t.params, r.reward, r.success, r.length, r.received_at"
+    " FROM results r JOIN tasks t USING (curriculum_id, task_index)"
+)
+_FIT_COLUMNS = "fit_index, tasks_sampled, results_seen, started_at, finished_at, error"
+
+
+def _result(row: tuple[Any, ...]) -> StoredResult:
+    seq, index, params, reward, success, length, received_at = row
+    return StoredResult(
+        seq, index, json.loads(params), reward, None if success is None else bool(success), length, received_at
+    )
 
 
 @dataclass
@@ -144,40 +262,90 @@ class Store:
         self._pending: list[_Write] = []
 
     def _migrate(self) -> None:
+        """Bring the database up to ``SCHEMA_VERSION``, one version per transaction."""
         version = self._db.execute("PRAGMA user_version").fetchone()[0]
-        if version == SCHEMA_VERSION:
-            return
-        if version != 0:
+        if version > SCHEMA_VERSION:
             raise StoreError(f"{self.path}: schema version {version}, this service reads version {SCHEMA_VERSION}")
-        self._db.executescript(f"BEGIN; {_SCHEMA} PRAGMA user_version = {SCHEMA_VERSION}; COMMIT;")
+        for step in range(version, SCHEMA_VERSION):
+            if step:
+                log.info("%s: migrating the schema from version %d to %d", self.path, step, step + 1)
+            self._db.executescript(f"BEGIN; {_MIGRATIONS[step]} PRAGMA user_version = {step + 1}; COMMIT;")
 
     def curricula(self) -> list[StoredCurriculum]:
         rows = self._db.execute("SELECT id, name, spec, created_at FROM curricula ORDER BY id")
         return [StoredCurriculum(*row) for row in rows]
 
-    def tasks(self, curriculum_id: int) -> list[StoredTask]:
+    def snapshot(self, curriculum_id: int) -> StoredSnapshot | None:
+        row = self._db.execute(
+            "SELECT results_seen, last_seq, tasks_issued, issued_through, fits_waiting, history_rows,"
+            " teacher FROM snapshots WHERE curriculum_id = ?",
+            (curriculum_id,),
+        ).fetchone()
+        if row is None:
+            return None
+        results_seen, last_seq, tasks_issued, issued_through, waiting, history_rows, teacher = row
+        return StoredSnapshot(
+            results_seen,
+            last_seq,
+            tasks_issued,
+            issued_through,
+            json.loads(waiting),
+            history_rows,
+            json.loads(teacher),
+        )
+
+    def history(self, curriculum_id: int, rows: int) -> np.ndarray:
+        """The first ``rows`` history rows, from the chunks written with the snapshots."""
+        chunks = self._db.execute(
+            "SELECT first_row, row_count, width, data FROM history_chunks"
+            " WHERE curriculum_id = ? AND first_row < ? ORDER BY first_row",
+            (curriculum_id, rows),
+        ).fetchall()
+        if not chunks:
+            if rows:
+                raise StoreError(f"{self.path}: curriculum {curriculum_id} has no history chunks for {rows} rows")
+            return np.empty((0, 0))
+        width = chunks[0][2]
+        history = np.empty((rows, width))
+        filled = 0
+        for first_row, row_count, chunk_width, data in chunks:
+            if first_row != filled or chunk_width != width or first_row + row_count > rows:
+                raise StoreError(
+                    f"{self.path}: curriculum {curriculum_id}'s history chunk at row {first_row} "
+                    f"({row_count} x {chunk_width}) does not follow row {filled} of {rows} x {width}"
+                )
+            history[first_row : first_row + row_count] = np.frombuffer(data, dtype="<f8").reshape(row_count, width)
+            filled += row_count
+        if filled != rows:
+            raise StoreError(
+                f"{self.path}: curriculum {curriculum_id}'s history chunks end at row {filled}, not {rows}"
+            )
+        return history
+
+    def tasks_from(self, curriculum_id: int, first_index: int) -> list[StoredTask]:
+        """Issued tasks from ``first_index`` on, in index order."""
         rows = self._db.execute(
-            "SELECT task_index, results_seen FROM tasks WHERE curriculum_id = ? ORDER BY task_index", (curriculum_id,)
+            "SELECT task_index, results_seen FROM tasks WHERE curriculum_id = ? AND task_index >= ?"
+            " ORDER BY task_index",
+            (curriculum_id, first_index),
         )
         return [StoredTask(*row) for row in rows]
 
-    def result_count(self, curriculum_id: int) -> int:
-        row = self._db.execute("SELECT count(*) FROM results WHERE curriculum_id = ?", (curriculum_id,)).fetchone()
+    def result_count(self, curriculum_id: int, after_seq: int = 0) -> int:
+        row = self._db.execute(
+            "SELECT count(*) FROM results WHERE curriculum_id = ? AND seq > ?", (curriculum_id, after_seq)
+        ).fetchone()
         count: int = row[0]
         return count
 
-    def results(self, curriculum_id: int) -> Iterator[StoredResult]:
-        """Accepted results in the order the teacher learned from them, with the tasks they answer."""
+    def results(self, curriculum_id: int, after_seq: int = 0) -> Iterator[StoredResult]:
+        """Accepted results stored after ``after_seq``, in the order the teacher learned from them,
+        with the tasks they answer."""
         rows = self._db.execute(
-            "SELECT r.task_index, t.params, r.reward, r.success, r.length, r.received_at"
-            " FROM results r JOIN tasks t USING (curriculum_id, task_index)"
-            " WHERE r.curriculum_id = ? ORDER BY r.seq",
-            (curriculum_id,),
+            f"{_SELECT_RESULTS} WHERE r.curriculum_id = ? AND r.seq > ? ORDER BY r.seq", (curriculum_id, after_seq)
         )
-        for index, params, reward, success, length, received_at in rows:
-            yield StoredResult(
-                index, json.loads(params), reward, None if success is None else bool(success), length, received_at
-            )
+        for row in rows:
+            yield _result(row)
 
     def outstanding_tasks(self, curriculum_id: int, first_index: int) -> Iterator[tuple[int, Task, float]]:
         """Issued tasks from ``first_index`` on that have no result yet, with when they were issued."""
@@ -200,13 +368,33 @@ class Store:
         )
         return {index for (index,) in rows}
 
-    def fits(self, curriculum_id: int) -> list[StoredFit]:
+    def recent_results(self, curriculum_id: int, limit: int) -> list[StoredResult]:
+        """The last ``limit`` results, oldest first."""
         rows = self._db.execute(
-            "SELECT fit_index, tasks_sampled, results_seen, started_at, finished_at, error"
-            " FROM fits WHERE curriculum_id = ? ORDER BY fit_index",
-            (curriculum_id,),
+            f"{_SELECT_RESULTS} WHERE r.curriculum_id = ? ORDER BY r.seq DESC LIMIT ?", (curriculum_id, limit)
+        ).fetchall()
+        return [_result(row) for row in reversed(rows)]
+
+    def fits_since(self, curriculum_id: int, results_seen: int) -> list[StoredFit]:
+        """Fits installed (or failed) once the teacher had seen ``results_seen`` results, with their models."""
+        rows = self._db.execute(
+            f"SELECT {_FIT_COLUMNS}, model FROM fits WHERE curriculum_id = ? AND results_seen >= ? ORDER BY fit_index",
+            (curriculum_id, results_seen),
         )
         return [StoredFit(*row) for row in rows]
+
+    def recent_fits(self, curriculum_id: int, limit: int) -> list[StoredFit]:
+        """The last ``limit`` fits without their models, oldest first."""
+        rows = self._db.execute(
+            f"SELECT {_FIT_COLUMNS} FROM fits WHERE curriculum_id = ? ORDER BY fit_index DESC LIMIT ?",
+            (curriculum_id, limit),
+        ).fetchall()
+        return [StoredFit(*row) for row in reversed(rows)]
+
+    def fit_count(self, curriculum_id: int) -> int:
+        row = self._db.execute("SELECT count(*) FROM fits WHERE curriculum_id = ?", (curriculum_id,)).fetchone()
+        count: int = row[0]
+        return count
 
     def write_now(self, statements: Statements) -> None:
         """Commit on the spot; only before ``start``, when there is no event loop to group on."""
@@ -243,9 +431,15 @@ class Store:
         self._queue(_Write(statements, future, on_commit, on_abort))
         return future
 
-    def write_later(self, statements: Statements) -> None:
-        """Queue a write nobody waits for (telemetry); a failure is logged."""
-        self._queue(_Write(statements, None, None, None))
+    def write_later(
+        self,
+        statements: Statements,
+        on_commit: Callable[[], object] | None = None,
+        on_abort: Callable[[], object] | None = None,
+    ) -> None:
+        """Queue a write nobody waits for (telemetry, snapshots); a failure is logged. The
+        callbacks run as for ``write``."""
+        self._queue(_Write(statements, None, on_commit, on_abort))
 
     def close(self) -> None:
         """Commit what is queued, then close the database."""

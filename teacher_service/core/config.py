@@ -23,7 +23,7 @@ class Settings(BaseSettings):
     """Interface to bind; the default keeps the service private to this machine."""
     port: int = Field(default=8000, ge=0, le=65535)
     db: Path = Path("runs/teacher.db")
-    """SQLite database holding every curriculum's history; a restart replays it."""
+    """SQLite database holding every curriculum's history; a restart loads its newest snapshots."""
     teacher_token: SecretStr | None = None
     """When set, every PUT and POST must carry ``Authorization: Bearer <token>``. A placeholder or
     a token shorter than 16 characters is refused at start-up; empty means none."""
@@ -44,6 +44,8 @@ class Settings(BaseSettings):
     task_window: int = Field(default=10_000, ge=1, le=1_000_000)
     """A task also expires once this many later tasks of its curriculum have been handed out, which
     bounds each curriculum's memory of tasks awaiting results."""
+    snapshot_every: int = Field(default=1000, ge=1, le=1_000_000)
+    """Results between two stored teacher snapshots: a restart replays at most about this many."""
     rate_window_s: float = Field(default=10.0, gt=0)
     """Window over which ``results_per_second`` is measured."""
     fit_processes: int = Field(default=2, ge=1, le=8)

@@ -29,7 +29,6 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
-from sklearn.mixture import GaussianMixture
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
@@ -107,7 +106,12 @@ class MixtureFit:
 
 
 def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: int, random_state: int) -> MixtureFit:
-    """Fit one mixture per candidate size and keep the lowest AIC (ties go to fewer components)."""
+    """Fit one mixture per candidate size and keep the lowest AIC (ties go to fewer components).
+
+    scikit-learn is imported here, in the fit process, rather than with the module: it is most of a
+    service's import time (~2.5 s of ~4 s on a loaded machine), and the service itself never fits."""
+    from sklearn.mixture import GaussianMixture
+
     with np.errstate(under="ignore"):
         mixtures = {
             k: GaussianMixture(
@@ -120,45 +124,61 @@ def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: i
     return MixtureFit(index, best.weights_, best.means_, best.covariances_, aics)
 
 
-TREE_GROWTH = 512
+TREE_GROWTH = 256
 """Once the history is large, the k-d tree is rebuilt every 1/TREE_GROWTH of its rows rather than
-every ``buffer_size``: a build over 1M tasks takes about half a second, and each must fit between
-two checkpoints, while the tasks scanned directly stay a few thousand."""
+every ``buffer_size``. Per result that costs a scan of up to two such intervals on the event loop
+(~12 ns a row) plus a share of a build on a thread (~0.5 s at 1M rows); at 1M rows, an interval of
+~3,900 keeps both near 0.1 ms, and leaves a build seconds to finish before it is needed."""
 
 
-def _build_tree(points: np.ndarray) -> cKDTree:
-    """A k-d tree over ``points`` (a view of rows that never change); scipy builds it without
-    holding the GIL, so a thread can do it while the event loop answers requests."""
-    return cKDTree(points)
+@dataclass(frozen=True)
+class _Tree:
+    """A k-d tree over the first occurrence of each position among some history rows."""
+
+    tree: cKDTree
+    rows: np.ndarray
+    """The history row of each point in the tree."""
+
+
+def _build_tree(rows: np.ndarray) -> _Tree:
+    """A k-d tree over ``rows`` (a view of history rows, which never change), repeats left out:
+    thousands of identical points (the hardest task, repeated) cannot be split and would fill one
+    leaf that every query landing there compares against (12 ms a query at 200,000 repeats, 16 us
+    without them). scipy builds the tree without holding the GIL, so a thread can do it while the
+    event loop answers requests."""
+    firsts = np.flatnonzero(rows[:, -1] == 0.0)
+    return _Tree(cKDTree(rows[firsts, :-3]), firsts)
 
 
 @dataclass
 class _TreeBuild:
     size: int
     job: BuildJob
-    tree: cKDTree | None = None
+    tree: _Tree | None = None
     handed_out: bool = False
 
 
 class _History:
-    """Every result as a row (task features, reward, ALP), and the exact nearest earlier task.
+    """Every result as a row (task features, reward, ALP, whether an earlier row has the same
+    features), and the exact nearest earlier task.
 
-    Older tasks sit in a k-d tree, newer ones are scanned directly. Which tasks the tree holds
+    Older tasks sit in a k-d tree (each position once, at its first row), newer ones are scanned
+    directly. Which tasks the tree holds
     depends only on the number of rows: at each checkpoint (every ``buffer_size`` rows, or every
     1/TREE_GROWTH of the rows once that is more) a tree over all rows so far is requested as a
     ``BuildJob``, and it replaces the current tree at the next checkpoint. The build has a whole
     interval to run off the event loop, and whoever built it (a thread, or this class itself when
     the output has not come back in time, as in a replay), the switch happens at the same row.
     Ties between equidistant tasks go to the tree, and within the scan to the earliest row, so the
-    answers never depend on timing.
+    answers never depend on timing, and a repeated task is always compared with its first row.
     """
 
     def __init__(self, dims: int, buffer_size: int) -> None:
         self.dims = dims
         self._buffer_size = buffer_size
-        self._rows = np.empty((2 * buffer_size, dims + 2))
+        self._rows = np.empty((2 * buffer_size, dims + 3))
         self.size = 0
-        self._tree: cKDTree | None = None
+        self._tree: _Tree | None = None
         self._tree_size = 0
         self._next_checkpoint = buffer_size
         self._build: _TreeBuild | None = None
@@ -167,36 +187,37 @@ class _History:
         rows: np.ndarray = self._rows[start : self.size].copy()
         return rows
 
-    def column(self, column: int, start: int) -> np.ndarray:
-        values: np.ndarray = self._rows[start : self.size, column].copy()
+    def alps(self, start: int) -> np.ndarray:
+        values: np.ndarray = self._rows[start : self.size, self.dims + 1].copy()
         return values
 
     def fit_points(self, start: int, stop: int) -> np.ndarray:
         """(task features, ALP) of rows ``start`` to ``stop``: the points a mixture is fitted to."""
         rows = self._rows[start:stop]
-        return np.concatenate([rows[:, : self.dims], rows[:, self.dims + 1 :]], axis=1)
+        return np.concatenate([rows[:, : self.dims], rows[:, self.dims + 1 : self.dims + 2]], axis=1)
 
-    def reward_near(self, point: np.ndarray) -> float:
+    def nearest(self, point: np.ndarray) -> tuple[float, float]:
+        """Distance to the nearest earlier task, and its reward; (inf, nan) for an empty history."""
         distance, reward = np.inf, np.nan
         if self._tree is not None:
             # One point, so scalars; the stubs also allow the arrays a batch of points would give.
-            distance, index = cast("tuple[float, np.intp]", self._tree.query(point))
-            reward = self._rows[index, self.dims]
+            distance, index = cast("tuple[float, np.intp]", self._tree.tree.query(point))
+            reward = self._rows[self._tree.rows[index], self.dims]
         if self.size > self._tree_size:
             offsets = self._rows[self._tree_size : self.size, : self.dims] - point
             squared = np.einsum("ij,ij->i", offsets, offsets)
             nearest = int(np.argmin(squared))
             if math.sqrt(squared[nearest]) < distance:
-                reward = self._rows[self._tree_size + nearest, self.dims]
-        return float(reward)
+                distance, reward = math.sqrt(squared[nearest]), self._rows[self._tree_size + nearest, self.dims]
+        return float(distance), float(reward)
 
-    def add(self, features: np.ndarray, reward: float, alp: float) -> None:
+    def add(self, features: np.ndarray, reward: float, alp: float, repeat: bool) -> None:
         if self.size == len(self._rows):
-            grown = np.empty((2 * len(self._rows), self.dims + 2))
+            grown = np.empty((2 * len(self._rows), self.dims + 3))
             grown[: self.size] = self._rows[: self.size]
             self._rows = grown  # a build still running holds the old array, whose rows are the same
         self._rows[self.size, : self.dims] = features
-        self._rows[self.size, self.dims :] = (reward, alp)
+        self._rows[self.size, self.dims :] = (reward, alp, float(repeat))
         self.size += 1
         if self.size == self._next_checkpoint:
             if self._build is not None:
@@ -209,15 +230,15 @@ class _History:
         self._build.handed_out = True
         return self._build.job
 
-    def adopt(self, job: BuildJob, tree: cKDTree) -> None:
+    def adopt(self, job: BuildJob, tree: _Tree) -> None:
         if self._build is not None and self._build.job is job:
             self._build.tree = tree
 
     def restore(self, rows: np.ndarray) -> None:
         """Take ``rows`` as the history, with the tree and pending build a live run had there."""
-        if rows.ndim != 2 or rows.shape[1] != self.dims + 2:
-            raise ValueError(f"history rows must have {self.dims + 2} columns, got shape {rows.shape}")
-        self._rows = np.empty((max(2 * len(rows), 2 * self._buffer_size), self.dims + 2))
+        if len(rows) and (rows.ndim != 2 or rows.shape[1] != self.dims + 3):
+            raise ValueError(f"history rows must have {self.dims + 3} columns, got shape {rows.shape}")
+        self._rows = np.empty((max(2 * len(rows), 2 * self._buffer_size), self.dims + 3))
         self._rows[: len(rows)] = rows
         self.size = len(rows)
         passed = [0, 0]  # the last two checkpoints at or before the last row
@@ -225,7 +246,7 @@ class _History:
             passed = [passed[1], self._next_checkpoint]
             self._next_checkpoint = self._advance(self._next_checkpoint)
         if passed[0]:
-            self._tree, self._tree_size = _build_tree(self._rows[: passed[0], : self.dims]), passed[0]
+            self._tree, self._tree_size = _build_tree(self._rows[: passed[0]]), passed[0]
         if passed[1]:
             self._build = _TreeBuild(passed[1], self._tree_job(passed[1], self._next_checkpoint))
 
@@ -237,7 +258,7 @@ class _History:
         self._build = _TreeBuild(self.size, self._tree_job(self.size, self._next_checkpoint))
 
     def _tree_job(self, size: int, needed_at: int) -> BuildJob:
-        return BuildJob(needed_at, functools.partial(_build_tree, self._rows[:size, : self.dims]))
+        return BuildJob(needed_at, functools.partial(_build_tree, self._rows[:size]))
 
     def _switch_to(self, build: _TreeBuild) -> None:
         self._tree = build.tree if build.tree is not None else build.job.run()
@@ -342,10 +363,9 @@ class AlpGmmTeacher(Teacher):
     def _learn(self, result: EpisodeResult) -> FitJob | None:
         features = self._to_features(self.space.to_array(result.task))
         reward = self._scaled(result.reward)
-        alp = 0.0
-        if self._history.size >= MIN_HISTORY_FOR_ALP:
-            alp = abs(reward - self._history.reward_near(features))
-        self._history.add(features, reward, alp)
+        distance, nearest_reward = self._history.nearest(features)
+        alp = abs(reward - nearest_reward) if self._history.size >= MIN_HISTORY_FOR_ALP else 0.0
+        self._history.add(features, reward, alp, repeat=distance == 0.0)
         if self.results_seen % self.params.fit_rate:
             return None
         self.fits_requested += 1
@@ -370,8 +390,8 @@ class AlpGmmTeacher(Teacher):
         return self._history.pending_build()
 
     def adopt_build(self, job: BuildJob, output: Any) -> None:
-        if not isinstance(output, cKDTree):
-            raise TypeError(f"expected the cKDTree a BuildJob returns, got {type(output).__name__}")
+        if not isinstance(output, _Tree):
+            raise TypeError(f"expected the tree a BuildJob returns, got {type(output).__name__}")
         self._history.adopt(job, output)
 
     def install(self, fitted: MixtureFit) -> None:
@@ -411,7 +431,8 @@ class AlpGmmTeacher(Teacher):
         return self._history.size
 
     def history(self, start: int) -> np.ndarray:
-        """One row per result: its task features, its (scaled) reward and its ALP."""
+        """One row per result: its task features, its (scaled) reward, its ALP, and 1.0 when an
+        earlier result had the same task features (else 0.0)."""
         return self._history.rows(start)
 
     def _export(self) -> dict[str, Any]:
@@ -437,7 +458,7 @@ class AlpGmmTeacher(Teacher):
     @property
     def recent_alps(self) -> np.ndarray:
         """ALP of the last ``fit_rate`` results: the data the next fit will see."""
-        return self._history.column(-1, max(self._history.size - self.params.fit_rate, 0))
+        return self._history.alps(max(self._history.size - self.params.fit_rate, 0))
 
     def _to_features(self, tasks: np.ndarray) -> np.ndarray:
         return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)

@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
@@ -305,9 +304,11 @@ def test_tree_switches_happen_at_fixed_counts_whoever_builds_the_tree(monkeypatc
     params = {"fit_rate": 50, "max_components": 3, "buffer_size": 8, "target_task_ratio": 0.5}
     built: list[int] = []
 
-    def counting_build(points: np.ndarray) -> Any:
-        built.append(len(points))
-        return cKDTree(points)
+    build = alp_gmm_module._build_tree
+
+    def counting_build(rows: np.ndarray) -> Any:
+        built.append(len(rows))
+        return build(rows)
 
     monkeypatch.setattr(alp_gmm_module, "_build_tree", counting_build)
     in_background = alp_gmm(KUKA_TASK_SPACE, 5, **params)
@@ -324,7 +325,7 @@ def test_tree_switches_happen_at_fixed_counts_whoever_builds_the_tree(monkeypatc
     job = late.build_job()
     assert job is not None and job.needed_at == 24 and late.build_job() is None
     repeated_hardest_task_run(late, 10, adopt=False)  # passes 24: built inline, and a new job is pending
-    late.adopt_build(job, cKDTree(np.zeros((1, len(KUKA_TASK_SPACE)))))  # too late: dropped
+    late.adopt_build(job, build(np.zeros((1, len(KUKA_TASK_SPACE) + 3))))  # too late: dropped
     fresh = alp_gmm(KUKA_TASK_SPACE, 5, **params)
     repeated_hardest_task_run(fresh, 20, adopt=False)
     repeated_hardest_task_run(fresh, 10, adopt=False)
@@ -334,11 +335,29 @@ def test_tree_switches_happen_at_fixed_counts_whoever_builds_the_tree(monkeypatc
 
 def test_the_tree_is_rebuilt_less_often_as_the_history_grows() -> None:
     teacher = alp_gmm(KUKA_TASK_SPACE, 0, fit_rate=2000, buffer_size=100)
-    rows = np.random.default_rng(1).random((60_000, len(KUKA_TASK_SPACE) + 2))
+    rows = np.random.default_rng(1).random((60_000, len(KUKA_TASK_SPACE) + 3))
+    rows[:, -1] = 0.0  # no repeats
     snapshot = teacher.snapshot()
     snapshot["state"]["history_rows"] = snapshot["results_seen"] = len(rows)
     teacher.restore(snapshot, rows)
     job = teacher.build_job()
     assert job is not None
     assert job.needed_at - 60_000 <= max(100, 60_000 // TREE_GROWTH)
-    assert job.run().n < 60_000
+    assert job.run().tree.n < 60_000
+
+
+def test_a_repeated_task_sits_in_the_tree_once_and_is_compared_with_its_first_result() -> None:
+    teacher = alp_gmm(fit_rate=1000, buffer_size=8)
+    same = {"wide": 50.0, "narrow": -0.5}
+    rng = np.random.default_rng(3)
+    history = [
+        (same if i % 2 else {"wide": 100 * a, "narrow": -b}, float(i)) for i, (a, b) in enumerate(rng.random((80, 2)))
+    ]
+    feed(teacher, history)
+    job = teacher.build_job()
+    assert job is not None
+    tree = job.run()
+    assert tree.tree.n == 41, "40 distinct tasks and the repeated one once"
+    assert teacher.history(0)[:, -1].sum() == 39
+    teacher.observe(EpisodeResult(same, 100.0))
+    assert teacher.recent_alps[-1] == 100.0 - 1.0, "the repeated task's first result had reward 1"
