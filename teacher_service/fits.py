@@ -26,6 +26,7 @@ why. It stays stopped until the service restarts; teachers keep sampling from th
 from __future__ import annotations
 
 import asyncio
+import importlib
 import logging
 import multiprocessing
 import os
@@ -54,6 +55,10 @@ MAX_DEATHS_IN_A_ROW = 3
 """Fit processes that may die with no fit finishing in between before the runner stops."""
 
 _LIVENESS_POLL_S = 0.5
+
+FIT_LIBRARIES = ("sklearn.mixture",)
+"""Imported by each fit process before it says it is ready, so that no fit's time limit pays for
+them; the service itself imports them only if it ever fits in place (a version-1 database)."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,8 @@ def _fit_forever(jobs: Queue[FitJob | None], outcomes: Queue[FitOutcome | None])
     that the service needs to answer requests."""
     os.nice(FIT_NICENESS)
     threadpool_limits(limits=1)
+    for library in FIT_LIBRARIES:
+        importlib.import_module(library)
     outcomes.cancel_join_thread()
     outcomes.put(None)
     service = multiprocessing.parent_process()
