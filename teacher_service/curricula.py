@@ -361,6 +361,7 @@ class Curriculum:
             last_task_index=self._last_result_index,
             tasks_issued=self.tasks_issued,
             issued_through=self.issued_through,
+            outstanding=sorted(self.outstanding),
             fits_waiting=sorted(self._fits_waiting),
             teacher=self.teacher.snapshot(),
             history=self.teacher.history(self._history_stored),
@@ -412,10 +413,12 @@ class Curriculum:
         stored = store.snapshot(self.id)
         after_seq = tasks_issued = issued_through = 0
         waiting: list[int] = []
+        awaited_then: list[int] = []
         if stored is not None:
             teacher.restore(stored.teacher, store.history(self.id, stored.history_rows))
             after_seq, tasks_issued, issued_through = stored.last_seq, stored.tasks_issued, stored.issued_through
             waiting, self._history_stored = stored.fits_waiting, stored.history_rows
+            awaited_then = stored.outstanding
         later_tasks = store.tasks_from(self.id, issued_through)
         self.tasks_issued = tasks_issued + len(later_tasks)
         self.issued_through = later_tasks[-1].index + 1 if later_tasks else issued_through
@@ -424,6 +427,7 @@ class Curriculum:
         due = deque(teacher.refit_job(index) for index in waiting)
         drawn_before = _tasks_drawn_before(later_tasks)
         models_found: list[tuple[Any, ...]] = []
+        answered: set[int] = set()
 
         def draw_to(count: int) -> None:
             if count > teacher.tasks_sampled:
@@ -442,13 +446,17 @@ class Curriculum:
             install_recorded(teacher.results_seen)
             draw_to(drawn_before(teacher.results_seen))
             job = self._learn(result.task_index, result.task, result.reward, result.success, result.length)
+            answered.add(result.task_index)
             if job is not None:
                 due.append(job)
         install_recorded(teacher.results_seen)
         draw_to(self.issued_through)
-        for index, task, issued_at in store.outstanding_tasks(self.id, self.issued_through - self._task_window):
-            self.outstanding[index] = task
-            self._awaiting.append((index, issued_at))
+        oldest_kept = self.issued_through - self._task_window
+        recent_then = [index for index in awaited_then if index >= oldest_kept]
+        for index, task, issued_at in store.awaited_tasks(self.id, recent_then, max(issued_through, oldest_kept)):
+            if index not in answered:
+                self.outstanding[index] = task
+                self._awaiting.append((index, issued_at))
         self._expire(time.time())
         for job in due:  # never recorded: the process died first
             self._lost_fits.append(job)

@@ -9,7 +9,7 @@ callbacks run, in the order they were submitted: the teachers see results in exa
 they are stored, which is the order a replay feeds them back.
 
 What a restart reads (schema version 2): per curriculum, its newest snapshot (one row: the
-teacher's exported state, the service's counters, and the sequence
+teacher's exported state, the service's counters and awaited task indices, and the sequence
 number of the last result it had learned), the teacher's append-only history as chunks of float64
 rows written with the snapshots, and only the tasks, results and fits stored after the snapshot.
 Fit rows carry the fitted model, so no installed fit is ever computed twice. A version-1 database
@@ -80,6 +80,7 @@ CREATE TABLE snapshots (
     last_seq INTEGER NOT NULL,
     tasks_issued INTEGER NOT NULL,
     issued_through INTEGER NOT NULL,
+    outstanding TEXT NOT NULL,
     fits_waiting TEXT NOT NULL,
     history_rows INTEGER NOT NULL,
     teacher TEXT NOT NULL,
@@ -112,9 +113,9 @@ INSERT_FIT = (  # REPLACE: a restart records again a fit it ran because the live
 )
 _PUT_SNAPSHOT = (  # last_seq: the result the teacher learned last; NULL, so refused, if it is not stored
     "INSERT OR REPLACE INTO snapshots (curriculum_id, results_seen, last_seq, tasks_issued, issued_through,"
-    " fits_waiting, history_rows, teacher, taken_at)"
+    " outstanding, fits_waiting, history_rows, teacher, taken_at)"
     " VALUES (?1, ?2, CASE WHEN ?2 = 0 THEN 0"
-    " ELSE (SELECT seq FROM results WHERE curriculum_id = ?1 AND task_index = ?3) END, ?4, ?5, ?6, ?7, ?8, ?9)"
+    " ELSE (SELECT seq FROM results WHERE curriculum_id = ?1 AND task_index = ?3) END, ?4, ?5, ?6, ?7, ?8, ?9, ?10)"
 )
 _PUT_HISTORY_CHUNK = (
     "INSERT OR REPLACE INTO history_chunks (curriculum_id, first_row, row_count, width, data) VALUES (?, ?, ?, ?, ?)"
@@ -178,6 +179,8 @@ class TeacherSnapshot:
     tasks_issued: int
     issued_through: int
     """One past the highest task index stored by then; tasks from here on were issued later."""
+    outstanding: list[int]
+    """Tasks awaiting a result then (at most ``KC_TASK_WINDOW``)."""
     fits_waiting: list[int]
     """Fits that had fallen due and not come back."""
     teacher: dict[str, Any]
@@ -193,6 +196,7 @@ class StoredSnapshot:
     last_seq: int
     tasks_issued: int
     issued_through: int
+    outstanding: list[int]
     fits_waiting: list[int]
     history_rows: int
     teacher: dict[str, Any]
@@ -214,6 +218,7 @@ def snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> Statem
         snapshot.last_task_index,
         snapshot.tasks_issued,
         snapshot.issued_through,
+        json.dumps(snapshot.outstanding),
         json.dumps(snapshot.fits_waiting),
         snapshot.history_from + len(rows),
         json.dumps(snapshot.teacher),
@@ -277,18 +282,19 @@ class Store:
 
     def snapshot(self, curriculum_id: int) -> StoredSnapshot | None:
         row = self._db.execute(
-            "SELECT results_seen, last_seq, tasks_issued, issued_through, fits_waiting, history_rows,"
+            "SELECT results_seen, last_seq, tasks_issued, issued_through, outstanding, fits_waiting, history_rows,"
             " teacher FROM snapshots WHERE curriculum_id = ?",
             (curriculum_id,),
         ).fetchone()
         if row is None:
             return None
-        results_seen, last_seq, tasks_issued, issued_through, waiting, history_rows, teacher = row
+        results_seen, last_seq, tasks_issued, issued_through, outstanding, waiting, history_rows, teacher = row
         return StoredSnapshot(
             results_seen,
             last_seq,
             tasks_issued,
             issued_through,
+            json.loads(outstanding),
             json.loads(waiting),
             history_rows,
             json.loads(teacher),
@@ -347,14 +353,21 @@ class Store:
         for row in rows:
             yield _result(row)
 
-    def outstanding_tasks(self, curriculum_id: int, first_index: int) -> Iterator[tuple[int, Task, float]]:
-        """Issued tasks from ``first_index`` on that have no result yet, with when they were issued."""
+    def awaited_tasks(
+        self, curriculum_id: int, indices: list[int], first_index: int
+    ) -> Iterator[tuple[int, Task, float]]:
+        """Tasks ``indices`` and every task from ``first_index`` on, each with when it was issued, in
+        index order: the tasks a restart may still await results for."""
+        lookup = "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index = ?"
+        for index in indices:
+            row = self._db.execute(lookup, (curriculum_id, index)).fetchone()
+            if row is None:
+                raise StoreError(f"{self.path}: curriculum {curriculum_id} has no task {index}")
+            yield row[0], json.loads(row[1]), row[2]
         rows = self._db.execute(
-            "SELECT t.task_index, t.params, t.issued_at FROM tasks t"
-            " WHERE t.curriculum_id = ? AND t.task_index >= ? AND NOT EXISTS"
-            " (SELECT 1 FROM results r WHERE r.curriculum_id = t.curriculum_id AND r.task_index = t.task_index)"
-            " ORDER BY t.task_index",
-            (curriculum_id, max(first_index, 0)),
+            "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index >= ?"
+            " ORDER BY task_index",
+            (curriculum_id, first_index),
         )
         for index, params, issued_at in rows:
             yield index, json.loads(params), issued_at

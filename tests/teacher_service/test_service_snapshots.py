@@ -191,6 +191,7 @@ def test_a_killed_service_restarts_from_its_snapshot_as_the_same_teacher(
         assert mirror.api.post("/curricula/snap/results", json={"results": late}).json() == {
             "accepted": 3,
             "duplicates": 0,
+            "expired": 0,
         }
         for task in unreported:
             mirror.learn(task["params"], 1.0)
@@ -272,7 +273,8 @@ def _version_1_database(path: Path, name: str, teacher: Teacher, batches: int) -
             tasks = teacher.sample(8 if batch < batches else 3)
             connection.executemany(
                 "INSERT INTO tasks VALUES (1, ?, ?, ?, ?)",
-                [(first + i, json.dumps(task), teacher.results_seen, 2.0 + batch) for i, task in enumerate(tasks)],
+                # issued now: tasks issued longer ago than KC_TASK_TTL_S are no longer awaited after a restart
+                [(first + i, json.dumps(task), teacher.results_seen, time.time()) for i, task in enumerate(tasks)],
             )
             if batch == batches:
                 break

@@ -22,8 +22,9 @@ def db(tmp_path: Path) -> Path:
     return tmp_path / "teacher.db"
 
 
-def _service(db: Path, ttl_s: float = TTL_S) -> ServiceProcess:
-    return ServiceProcess(db, env={"KC_TASK_WINDOW": str(WINDOW), "KC_TASK_TTL_S": str(ttl_s)})
+def _service(db: Path, ttl_s: float = TTL_S, snapshot_every: int = 1000) -> ServiceProcess:
+    env = {"KC_TASK_WINDOW": str(WINDOW), "KC_TASK_TTL_S": str(ttl_s), "KC_SNAPSHOT_EVERY": str(snapshot_every)}
+    return ServiceProcess(db, env=env)
 
 
 @pytest.fixture()
@@ -78,12 +79,19 @@ def test_a_task_expires_after_its_time_to_live(api, kuka_space):
     assert _report(api, "ttl", old + new) == {"accepted": 1, "duplicates": 0, "expired": 2}
 
 
-def test_a_restart_keeps_only_the_tasks_still_awaited(db, kuka_space):
-    with _service(db, ttl_s=600) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+@pytest.mark.parametrize("snapshot_every", [1, 1000], ids=["from-a-snapshot", "from-the-tasks"])
+def test_a_restart_keeps_only_the_tasks_still_awaited(db, kuka_space, snapshot_every):
+    with (
+        _service(db, ttl_s=600, snapshot_every=snapshot_every) as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api,
+    ):
         _create(api, kuka_space, "restart")
         ids = _draw(api, "restart", WINDOW + 2)
         _report(api, "restart", ids[-1:])
         service.kill()
-    with _service(db, ttl_s=600) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+    with (
+        _service(db, ttl_s=600, snapshot_every=snapshot_every) as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api,
+    ):
         assert _counters(api, "restart")["tasks_outstanding"] == WINDOW - 1
         assert _report(api, "restart", ids) == {"accepted": WINDOW - 1, "duplicates": 1, "expired": 2}
