@@ -95,7 +95,7 @@ class PPOConfig:
         return replace(self, **checked)
 
 
-TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed")
+TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed", "covar-gmm", "riac")
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {

@@ -16,7 +16,9 @@ from pydantic import Field, TypeAdapter, ValidationError
 from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
+from teacher_service.teachers.covar_gmm import CovarGmmParams
 from teacher_service.teachers.manual import ManualParams
+from teacher_service.teachers.riac import RiacParams
 from teacher_service.teachers.uniform import FixedParams, RandomParams
 
 log = logging.getLogger(__name__)
@@ -53,14 +55,32 @@ class FixedCurriculum(TypedSpec):
     params: FixedParams = Field(default_factory=FixedParams)
 
 
+class CovarGmmCurriculum(TypedSpec):
+    teacher: Literal["covar-gmm"]
+    params: CovarGmmParams = Field(default_factory=CovarGmmParams)
+
+
+class RiacCurriculum(TypedSpec):
+    teacher: Literal["riac"]
+    params: RiacParams = Field(default_factory=RiacParams)
+
+
 CurriculumRequest = Annotated[
-    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum, Field(discriminator="teacher")
+    AlpGmmCurriculum | ManualCurriculum | RandomCurriculum | FixedCurriculum | CovarGmmCurriculum | RiacCurriculum,
+    Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
 
 SPEC_CLASSES: dict[str, type[TypedSpec]] = {
     get_args(spec.model_fields["teacher"].annotation)[0]: spec
-    for spec in (AlpGmmCurriculum, ManualCurriculum, RandomCurriculum, FixedCurriculum)
+    for spec in (
+        AlpGmmCurriculum,
+        ManualCurriculum,
+        RandomCurriculum,
+        FixedCurriculum,
+        CovarGmmCurriculum,
+        RiacCurriculum,
+    )
 }
 
 _ADAPTER: TypeAdapter[CurriculumRequest] = TypeAdapter(CurriculumRequest)

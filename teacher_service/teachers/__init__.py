@@ -13,12 +13,17 @@ from typing import Any
 from common.task_space import TaskSpace
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.covar_gmm import CovarGmmTeacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.riac import RiacTeacher
 from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
 
 TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
-    {teacher.kind: teacher for teacher in (AlpGmmTeacher, ManualTeacher, RandomTeacher, FixedTeacher)}
+    {
+        teacher.kind: teacher
+        for teacher in (AlpGmmTeacher, ManualTeacher, RandomTeacher, FixedTeacher, CovarGmmTeacher, RiacTeacher)
+    }
 )
 
 

@@ -18,6 +18,8 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
     "random": {},
     "fixed": {},
+    "covar-gmm": {"fit_rate": 40, "max_components": 4},
+    "riac": {"max_region_size": 30},
 }
 
 
@@ -115,7 +117,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
     original = build(kind)
     run_student(original, 130, batch=7)
     original.sample(5)  # handed out, no result yet
-    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1)}
+    learned = {"alp-gmm": ("fits", 3), "manual": ("lesson", 1), "covar-gmm": ("fits", 3), "riac": ("splits", 2)}
     if kind in learned:
         entry, least = learned[kind]
         assert original.state()[entry] >= least, "the snapshot must hold learned state, not just counters"
