@@ -63,7 +63,7 @@ MASTERED_ABOVE = 75
 """A cube with more competence than this counts as mastered."""
 RELEVANT_DIMS = 2
 CHECKPOINTS = (5_000, 10_000, 20_000)
-FIT_POLL_S = 0.002
+FIT_POLL_S = 0.02
 
 REFERENCE_CLASSES = {"alp-gmm": ("alp_gmm", "ALPGMM"), "covar-gmm": ("covar_gmm", "CovarGMM"), "riac": ("riac", "RIAC")}
 """Our kind to the reference module and class that implement the same teacher."""
@@ -226,6 +226,12 @@ def run_reference(
     return play(toy, episodes, checkpoints, step)
 
 
+def describe(run: Run) -> str:
+    """One finished run, as a progress line."""
+    scores = ", ".join(f"{episodes:,}: {score:.0f}%" for episodes, score in run.mastered.items())
+    return f"{run.dims}-D {run.teacher} ({run.implementation}) seed {run.seed}: {scores} in {run.seconds:.0f} s"
+
+
 def summarise(runs: list[Run], checkpoints: list[int], skipped: dict[str, str]) -> str:
     lines = [
         f"% of the 100 cubes mastered (competence > {MASTERED_ABOVE}) after "
@@ -297,12 +303,14 @@ def main() -> None:
             start = time.perf_counter()
             mastered = runner.run(name, dims, args.episodes, checkpoints)
             runs.append(Run(dims, kind, "ours", seed, mastered, time.perf_counter() - start))
+            bar.write(describe(runs[-1]))
         if references:
             with reference_modules(args.reference) as classes:
                 for dims, kind, seed in itertools.product(spaces, references, seeds):
                     start = time.perf_counter()
                     mastered = run_reference(classes[kind], dims, seed, args.episodes, checkpoints, bar)
                     runs.append(Run(dims, kind, "reference", seed, mastered, time.perf_counter() - start))
+                    bar.write(describe(runs[-1]))
 
     print(summarise(runs, checkpoints, skipped))
     args.json.write_text(
