@@ -49,6 +49,7 @@ from typing import Any
 import httpx
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from common.schemas import API_PREFIX
@@ -268,6 +269,9 @@ def main() -> None:
     parser.add_argument("--reference", type=Path, help="teachDeepRL teachers to run beside ours")
     parser.add_argument("--json", type=Path, default=Path("teacher_toy.json"), help="where to write every run")
     args = parser.parse_args()
+    # One BLAS thread for the reference's in-process fits, as our fit process has: on a shared
+    # machine more threads only contend.
+    threadpool_limits(limits=1)
     # Duplicate-heavy early fits make scikit-learn warn; the warnings say nothing about the result.
     warnings.filterwarnings("ignore", category=ConvergenceWarning)
     # The reference builds float32 boxes from float64 bounds; gymnasium warns about each one.
