@@ -3,6 +3,7 @@ sampling modes, and sampling that follows a student's progress."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -112,3 +113,17 @@ def test_regions_are_picked_by_progress_among_all_regions_or_leaves(leaves_only:
     total = sum(region["progress"] for region in regions if region["leaf"] or not leaves_only)
     for region in picked:
         assert region["sampling_probability"] == pytest.approx(region["progress"] / total)
+
+
+def test_a_restored_teacher_rebuilds_regions_that_split_and_discarded() -> None:
+    teacher = riac(max_region_size=10, max_regions=7)
+    for episode, task in enumerate(teacher.sample(300)):
+        stuck = episode % 3 == 0  # a third of the results pile up on one point, which no cut can separate
+        teacher.observe(EpisodeResult({"x": 0.9, "y": 1.9} if stuck else task, learning_on_the_left(task, episode)))
+    state = teacher.state()
+    assert state["splits"] == 3 and state["discards"] > 0
+
+    restored = riac(max_region_size=10, max_regions=7)
+    restored.restore(json.loads(json.dumps(teacher.snapshot())), teacher.history(0))
+    assert restored.state() == state
+    assert restored.sample(200) == teacher.sample(200)
