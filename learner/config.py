@@ -95,7 +95,17 @@ class PPOConfig:
         return replace(self, **checked)
 
 
-TEACHERS: tuple[TeacherKind, ...] = ("alp-gmm", "manual", "random", "fixed", "adr", "self-paced", "currot")
+TEACHERS: tuple[TeacherKind, ...] = (
+    "alp-gmm",
+    "manual",
+    "random",
+    "fixed",
+    "adr",
+    "self-paced",
+    "currot",
+    "covar-gmm",
+    "riac",
+)
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {

@@ -17,8 +17,10 @@ from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
 from teacher_service.teachers.adr import AdrParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
+from teacher_service.teachers.covar_gmm import CovarGmmParams
 from teacher_service.teachers.currot import CurrotParams
 from teacher_service.teachers.manual import ManualParams
+from teacher_service.teachers.riac import RiacParams
 from teacher_service.teachers.self_paced import SelfPacedParams
 from teacher_service.teachers.uniform import FixedParams, RandomParams
 
@@ -71,6 +73,16 @@ class CurrotCurriculum(TypedSpec):
     params: CurrotParams = Field(default_factory=CurrotParams)
 
 
+class CovarGmmCurriculum(TypedSpec):
+    teacher: Literal["covar-gmm"]
+    params: CovarGmmParams = Field(default_factory=CovarGmmParams)
+
+
+class RiacCurriculum(TypedSpec):
+    teacher: Literal["riac"]
+    params: RiacParams = Field(default_factory=RiacParams)
+
+
 CurriculumRequest = Annotated[
     AlpGmmCurriculum
     | ManualCurriculum
@@ -78,7 +90,9 @@ CurriculumRequest = Annotated[
     | FixedCurriculum
     | AdrCurriculum
     | SelfPacedCurriculum
-    | CurrotCurriculum,
+    | CurrotCurriculum
+    | CovarGmmCurriculum
+    | RiacCurriculum,
     Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
@@ -93,6 +107,8 @@ SPEC_CLASSES: dict[str, type[TypedSpec]] = {
         AdrCurriculum,
         SelfPacedCurriculum,
         CurrotCurriculum,
+        CovarGmmCurriculum,
+        RiacCurriculum,
     )
 }
 

@@ -14,9 +14,11 @@ from common.task_space import TaskSpace
 from teacher_service.teachers.adr import AdrTeacher
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.covar_gmm import CovarGmmTeacher
 from teacher_service.teachers.currot import CurrotTeacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.riac import RiacTeacher
 from teacher_service.teachers.self_paced import SelfPacedTeacher
 from teacher_service.teachers.uniform import FixedTeacher, RandomTeacher
 
@@ -31,6 +33,8 @@ TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
             AdrTeacher,
             SelfPacedTeacher,
             CurrotTeacher,
+            CovarGmmTeacher,
+            RiacTeacher,
         )
     }
 )

@@ -28,11 +28,10 @@ from typing import Annotated, Any, cast
 import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
-from scipy.special import ndtri
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
-from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
+from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
 
 MIN_HISTORY_FOR_ALP = 6
@@ -294,16 +293,10 @@ class _Sampler:
         """Task features from uniforms: ``choice`` (n,) picks components, ``normal_quantiles``
         (n, d) become standard normals by the inverse CDF, so each draw uses a fixed count."""
         component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
-        normals = _standard_normals(normal_quantiles)
+        normals = standard_normals(normal_quantiles)
         offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], normals)
         features: np.ndarray = self.task_means[component] + offsets
         return features
-
-
-def _standard_normals(uniforms: np.ndarray) -> np.ndarray:
-    """Inverse-CDF normals from uniforms in [0, 1); shifted off 0 so a drawn 0 stays finite (a 2**-54
-    bias is immaterial)."""
-    return ndtri(uniforms + 2.0**-54)
 
 
 class AlpGmmTeacher(Teacher):
@@ -348,7 +341,7 @@ class AlpGmmTeacher(Teacher):
             tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
             origins = ["gmm" if gmm else "uniform" for gmm in from_gmm]
         elif self._easiest_unit is not None:
-            near_easiest = self._easiest_unit + self.params.bootstrap_spread * _standard_normals(normal_quantiles)
+            near_easiest = self._easiest_unit + self.params.bootstrap_spread * standard_normals(normal_quantiles)
             tasks = self.space.from_unit(np.clip(near_easiest, 0.0, 1.0))
             origins = ["near-easiest"] * count
         else:

@@ -104,6 +104,16 @@ def test_put_creates_then_confirms_an_identical_curriculum_and_refuses_a_differe
             ("body", "alp-gmm", "params", "max_components"),
             "less than or equal to 16",
         ),
+        (
+            {"params": {"fit_rate": 10**6}, "teacher": "covar-gmm"},
+            ("body", "covar-gmm", "params", "fit_rate"),
+            "less than or equal to 2000",
+        ),
+        (
+            {"params": {"max_region_size": 10**6}, "teacher": "riac"},
+            ("body", "riac", "params", "max_region_size"),
+            "less than or equal to 1000",
+        ),
         ({"params": {"seed": 3}}, ("body", "random", "params", "seed"), "Extra inputs"),
         ({"extra": True}, ("body", "random", "extra"), "Extra inputs"),
     ],

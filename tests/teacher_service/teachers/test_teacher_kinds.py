@@ -21,6 +21,8 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "adr": {"queue_length": 3, "reward_range": [-1.0, 1.0]},
     "self-paced": {"update_every": 20, "reward_range": [-1.0, 1.0]},
     "currot": {"particles": 40, "update_every": 20, "buffer_size": 60, "candidates": 8, "delta": 0.0},
+    "covar-gmm": {"fit_rate": 40, "max_components": 4},
+    "riac": {"max_region_size": 30},
 }
 
 
@@ -124,6 +126,8 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
         "adr": ("widened", 3),
         "self-paced": ("updates", 3),
         "currot": ("fits", 3),
+        "covar-gmm": ("fits", 3),
+        "riac": ("splits", 2),
     }
     if kind in learned:
         entry, least = learned[kind]

@@ -1,0 +1,264 @@
+"""Covar-GMM (Moulin-Frier, Nguyen and Oudeyer 2014): sample tasks where reward grows with time.
+
+Each result becomes a point (task features, time, reward), where time is the result's position in
+the current batch of ``fit_rate`` results, scaled to [0, 1). Every ``fit_rate`` results, Gaussian
+mixtures with k = min..max components are fitted to that batch and the one with the lowest AIC is
+kept. A component whose time-reward covariance is positive covers tasks whose reward rose during the
+batch: the student is making progress there. A task comes from a component picked in proportion to
+that covariance (its positive part, or with ``absolute_progress`` its absolute value, so forgetting
+counts too), drawn from the component's Gaussian over the task coordinates and clipped to the box;
+with probability ``random_task_ratio``, and for the first ``fit_rate`` tasks (the bootstrap), it is
+uniform over the box. When no component shows progress, one is picked uniformly.
+
+Against the teachDeepRL implementation (Portelas et al. 2019), whose defaults these are: tasks are
+rescaled to [0, 1] per dimension before the fit (switchable; on a unit box it changes nothing), the
+fit runs as a ``FitJob`` off the request path (so tasks drawn while it runs come from the previous
+model), and every draw is addressed by the task's index instead of a global generator.
+
+When it helps: like ALP-GMM, for a student that can learn only part of the space at a time; it sees
+progress only where one batch of ``fit_rate`` results shows a trend, so it needs students whose
+reward moves within a few hundred episodes.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from common.task_space import Task, TaskSpace
+from teacher_service.teachers.alp_gmm import MAX_COMPONENTS, MAX_EM_INITS, MAX_FIT_RATE, MixtureFit, fit_mixture
+from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms, standard_normals
+from teacher_service.teachers.params import TeacherParams
+
+
+class CovarGmmParams(TeacherParams):
+    fit_rate: int = Field(default=250, ge=4, le=MAX_FIT_RATE)
+    """Results per batch: a mixture is fitted to each batch; the first ``fit_rate`` tasks are uniform."""
+    random_task_ratio: float = Field(default=0.2, ge=0.0, le=1.0)
+    """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
+    min_components: int = Field(default=2, ge=1, le=MAX_COMPONENTS)
+    """Fewest Gaussians tried per fit."""
+    max_components: int = Field(default=10, ge=1, le=MAX_COMPONENTS)
+    """Most Gaussians tried per fit; the candidate with the lowest AIC wins."""
+    nb_em_init: int = Field(default=1, ge=1, le=MAX_EM_INITS)
+    """EM restarts per candidate mixture."""
+    absolute_progress: bool = False
+    """Pick components by the absolute time-reward covariance (progress or forgetting) instead of its
+    positive part (progress only, the reference's default)."""
+    rescale_tasks: bool = True
+    """Fit mixtures on tasks rescaled to [0, 1] per dimension."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CovarGmmParams:
+        if self.min_components > self.max_components:
+            raise ValueError(
+                f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
+            )
+        if self.max_components > self.fit_rate:
+            raise ValueError(
+                f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
+                "each fit sees fit_rate points"
+            )
+        return self
+
+
+@dataclass(frozen=True)
+class _Sampler:
+    """An installed mixture, prepared for sampling task features (time and reward dropped)."""
+
+    fit: MixtureFit
+    choice_cdf: np.ndarray
+    task_means: np.ndarray
+    task_cholesky: np.ndarray
+
+    @classmethod
+    def prepare(cls, fit: MixtureFit, absolute: bool) -> _Sampler:
+        covariances = fit.covariances[:, -2, -1]
+        progress = np.abs(covariances) if absolute else np.clip(covariances, 0.0, None)
+        total = progress.sum()
+        probabilities = progress / total if total > 0 else np.full(len(progress), 1.0 / len(progress))
+        return cls(
+            fit=fit,
+            choice_cdf=np.cumsum(probabilities),
+            task_means=fit.means[:, :-2],
+            task_cholesky=np.linalg.cholesky(fit.covariances[:, :-2, :-2]),
+        )
+
+    @property
+    def probabilities(self) -> np.ndarray:
+        return np.diff(self.choice_cdf, prepend=0.0)
+
+    def draw(self, choice: np.ndarray, normal_quantiles: np.ndarray) -> np.ndarray:
+        """Task features from uniforms: ``choice`` (n,) picks components, ``normal_quantiles`` (n, d)
+        become the Gaussian draw."""
+        component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
+        offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], standard_normals(normal_quantiles))
+        features: np.ndarray = self.task_means[component] + offsets
+        return features
+
+
+class CovarGmmTeacher(Teacher):
+    """Time-reward covariance teacher over a Gaussian mixture (see the module docstring)."""
+
+    kind = "covar-gmm"
+    Params = CovarGmmParams
+    params: CovarGmmParams
+
+    def __init__(self, space: TaskSpace, seed: int, params: CovarGmmParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
+        self._width = len(space) + 2
+        self._rows = np.empty((2 * self.params.fit_rate, self._width))
+        self._size = 0
+        self._sampler: _Sampler | None = None
+        self.fits_requested = 0
+        self.fits_installed = 0
+
+    def _draw(self, first_index: int, count: int) -> list[Task]:
+        dims = len(self.space)
+        # Per task: uniform-or-mixture coin, component choice, d normal quantiles, d uniform coordinates.
+        uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + 2 * dims)
+        tasks = self.space.from_unit(uniforms[:, 2 + dims :])
+        if self._sampler is not None:
+            from_gmm = uniforms[:, 0] >= self.params.random_task_ratio
+            features = self._sampler.draw(uniforms[:, 1], uniforms[:, 2 : 2 + dims])
+            tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
+        return [self.space.from_array(row) for row in tasks]
+
+    def _learn(self, result: EpisodeResult) -> FitJob | None:
+        rate = self.params.fit_rate
+        if self._size == len(self._rows):
+            grown = np.empty((2 * len(self._rows), self._width))
+            grown[: self._size] = self._rows[: self._size]
+            self._rows = grown
+        time = (self._size % rate) / rate
+        self._rows[self._size, :-2] = self._to_features(self.space.to_array(result.task))
+        self._rows[self._size, -2:] = (time, result.reward)
+        self._size += 1
+        if self._size % rate:
+            return None
+        self.fits_requested += 1
+        return self.refit_job(self.fits_requested - 1)
+
+    def refit_job(self, index: int) -> FitJob:
+        """Fit ``index`` sees batch ``index``: the ``fit_rate`` results before it fell due."""
+        if not 0 <= index < self.fits_requested:
+            raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
+        rate = self.params.fit_rate
+        run = functools.partial(
+            fit_mixture,
+            index,
+            self._rows[index * rate : (index + 1) * rate].copy(),
+            range(self.params.min_components, self.params.max_components + 1),
+            self.params.nb_em_init,
+            indexed_seed(self.seed, FIT_STREAM, index),
+        )
+        return FitJob(index=index, run=run)
+
+    def install(self, fitted: MixtureFit) -> None:
+        if not isinstance(fitted, MixtureFit):
+            raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
+        if self._sampler is not None and fitted.index <= self._sampler.fit.index:
+            raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
+        self._sampler = _Sampler.prepare(fitted, self.params.absolute_progress)
+        self.fits_installed += 1
+
+    def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
+        return {
+            "index": fitted.index,
+            "weights": fitted.weights.tolist(),
+            "means": fitted.means.tolist(),
+            "covariances": fitted.covariances.tolist(),
+            "aic_by_components": [[k, aic] for k, aic in fitted.aic_by_components.items()],
+        }
+
+    def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
+        weights = np.array(data["weights"], dtype=np.float64)
+        means = np.array(data["means"], dtype=np.float64)
+        covariances = np.array(data["covariances"], dtype=np.float64)
+        components, width = len(weights), self._width
+        if means.shape != (components, width) or covariances.shape != (components, width, width):
+            raise ValueError(
+                f"a mixture of {components} components over {width} coordinates (task, time, reward) needs "
+                f"means of shape {(components, width)} and covariances of shape {(components, width, width)}, "
+                f"got {means.shape} and {covariances.shape}"
+            )
+        aics = {int(k): float(aic) for k, aic in data["aic_by_components"]}
+        return MixtureFit(int(data["index"]), weights, means, covariances, aics)
+
+    @property
+    def history_size(self) -> int:
+        return self._size
+
+    def history(self, start: int) -> np.ndarray:
+        """One row per result: its task features, its time in its batch and its reward."""
+        rows: np.ndarray = self._rows[start : self._size].copy()
+        return rows
+
+    def _export(self) -> dict[str, Any]:
+        return {
+            "history_rows": self._size,
+            "fits_requested": self.fits_requested,
+            "fits_installed": self.fits_installed,
+            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
+        }
+
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        if len(history) != state["history_rows"]:
+            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
+        if len(history) and (history.ndim != 2 or history.shape[1] != self._width):
+            raise ValueError(f"history rows must have {self._width} columns, got shape {history.shape}")
+        self._rows = np.empty((max(2 * len(history), 2 * self.params.fit_rate), self._width))
+        self._rows[: len(history)] = history
+        self._size = len(history)
+        self.fits_requested = int(state["fits_requested"])
+        self.fits_installed = int(state["fits_installed"])
+        model = state["model"]
+        self._sampler = (
+            None if model is None else _Sampler.prepare(self.import_fit(model), self.params.absolute_progress)
+        )
+
+    def _to_features(self, tasks: np.ndarray) -> np.ndarray:
+        return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)
+
+    def _to_task_units(self, features: np.ndarray) -> np.ndarray:
+        return self.space.from_unit(features) if self.params.rescale_tasks else features
+
+    def _describe(self) -> dict[str, Any]:
+        rate = self.params.fit_rate
+        return {
+            "bootstrapping": self._sampler is None,
+            "fits": self.fits_installed,
+            "fits_requested": self.fits_requested,
+            "last_fit_index": self._sampler.fit.index if self._sampler else None,
+            "next_fit_at_results": (self.results_seen // rate + 1) * rate,
+            "components": self._components(),
+            "aic_by_components": (
+                {str(k): aic for k, aic in self._sampler.fit.aic_by_components.items()} if self._sampler else {}
+            ),
+        }
+
+    def _components(self) -> list[dict[str, Any]]:
+        if self._sampler is None:
+            return []
+        fit = self._sampler.fit
+        scale = (self.space.high - self.space.low) if self.params.rescale_tasks else np.ones(len(self.space))
+        return [
+            {
+                "weight": float(weight),
+                "mean": dict(zip(self.space.names, self._to_task_units(mean[:-2]).tolist(), strict=True)),
+                "covariance": (covariance[:-2, :-2] * np.outer(scale, scale)).tolist(),
+                "mean_time": float(mean[-2]),
+                "mean_reward": float(mean[-1]),
+                "time_reward_covariance": float(covariance[-2, -1]),
+                "sampling_probability": float(probability),
+            }
+            for weight, mean, covariance, probability in zip(
+                fit.weights, fit.means, fit.covariances, self._sampler.probabilities, strict=True
+            )
+        ]
