@@ -93,3 +93,27 @@ def test_a_teacher_parameter_the_teacher_refuses_is_reported_before_training(tmp
     assert main(["train", "--teacher-param", "fit_rate=1", "--run-dir", str(tmp_path / "run")]) == 2
     error = capsys.readouterr().err
     assert "cannot register curriculum 'run'" in error and "fit_rate" in error
+
+
+def test_an_unknown_environment_is_refused_by_name(capsys):
+    with pytest.raises(SystemExit) as stopped:
+        main(["train", "--env", "KukaGrasp-v9"])
+    assert stopped.value.code == 2
+    assert "--env: invalid choice: 'KukaGrasp-v9'" in capsys.readouterr().err
+
+
+def test_a_run_keeps_its_environment_when_resumed(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    config = TrainConfig()
+    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
+    assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), "--env", "KukaGraspHard-v0"]) == 2
+    assert "trains on KukaGrasp-v0; choose another --run-dir for a run on KukaGraspHard-v0" in capsys.readouterr().err
+
+
+def test_the_hard_family_registers_its_own_task_space(tmp_path, capsys):
+    """The teacher sees all eight parameters: the lesson plan, which knows only the book's six, refuses them."""
+    run_dir = tmp_path / "run"
+    assert main(["train", "--env", "KukaGraspHard-v0", "--teacher", "manual", "--run-dir", str(run_dir)]) == 2
+    error = capsys.readouterr().err
+    assert "cannot register curriculum 'run'" in error and "obj_far" in error and "shaping" in error
