@@ -27,7 +27,7 @@ import numpy as np
 
 from common import ENV_IDS, HARD_ENV_ID
 from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.task_space import GRASP_MARGIN_HARDEST, KUKA_HARD_BOOK_HARDEST, Task, task_space_for
+from common.task_space import KUKA_HARD_BOOK_HARDEST, Task, task_space_for
 from learner.stats import wilson_interval
 
 POLICIES = ("zero", "random", "scripted")
@@ -92,8 +92,7 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[t
 def points(env_id: str) -> dict[str, Task]:
     """The family's easiest and hardest points, the book's hardest where it is a point of the family,
     and points in between: every parameter a share of the way from its easiest to its hardest value,
-    then the hard family's placement and margin walked alone from the book's hardest (``shaping``
-    changes the returns only, not whether a fixed policy succeeds)."""
+    then the hard family's two new parameters walked alone from the book's hardest."""
     space = task_space_for(env_id)
     easiest, hardest = space.easiest(), space.hardest()
     named = {"easiest": easiest}
@@ -104,10 +103,9 @@ def points(env_id: str) -> dict[str, Task]:
     if env_id == HARD_ENV_ID:
         book = KUKA_HARD_BOOK_HARDEST
         named["book's hardest"] = book
-        for share in (0.5, 1.0):
+        for share in (0.25, 0.5, 0.75, 1.0):
             named[f"book's hardest, obj_far={share:g}"] = {**book, "obj_far": share}
-        for margin in (0.05, GRASP_MARGIN_HARDEST):
-            named[f"book's hardest, grasp_margin={margin:g}"] = {**book, "grasp_margin": margin}
+        named["book's hardest, shaping=0"] = {**book, "shaping": 0.0}
     named["hardest"] = hardest
     return named
 

@@ -11,9 +11,8 @@ scene is loaded once and snapshotted; a reset restores the snapshot in under a m
 of reloading every model (tens of milliseconds), with the same trajectories.
 
 ``KukaGraspHard-v0`` (``KukaGraspHardEnv``) is a harder family around the book's task, for which the
-book's hardest task needs no curriculum: three more parameters move the block far from where the
-gripper starts, fade out the reward's distance shaping and count only grasps near the block's centre
-(``common.task_space.KUKA_HARD_TASK_SPACE``).
+book's hardest task needs no curriculum: two more parameters move the block far from where the
+gripper starts and fade out the reward's distance shaping (``common.task_space.KUKA_HARD_TASK_SPACE``).
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ from gymnasium import spaces
 from common import ENV_ID, HARD_ENV_ID
 from common.bullet import direct_client, pybullet
 from common.kuka_arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
-from common.task_space import GRASP_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE, Task, TaskSpace
+from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE, Task, TaskSpace
 
 TIME_STEP = 1.0 / 240.0
 SOLVER_ITERATIONS = 150
@@ -74,9 +73,6 @@ FAR_CENTRE = (0.532, 0.0)
 """The gripper's x and y at the book's default start pose."""
 FAR_MIN_DISTANCE = 0.16
 """A far block lies at least this far (metres) from ``FAR_CENTRE``; random actions rarely end there."""
-HELD_OFFSET_INDEX = 7
-"""Observation entry of a held block's offset along its length from the fingers (the block's y in the
-gripper's frame; the fingers close across the block, along the gripper's x)."""
 FAR_CANDIDATES = 64
 """Uniform draws per far placement, the first far enough is kept (all 64 fail with probability ~1e-12)."""
 
@@ -187,7 +183,7 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         if terminated:
             self._grasp()
         observation, block_z = self._observe()
-        success = block_z > SUCCESS_BLOCK_Z and self._held_near_centre(observation)
+        success = block_z > SUCCESS_BLOCK_Z
         shaping = self._distance_weight()
         distance = self._block_to_end_effector_distance() if shaping else 0.0
         reward = (
@@ -262,10 +258,6 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """Weight of the block-distance penalty in the reward: the book's reward keeps all of it."""
         return 1.0
 
-    def _held_near_centre(self, observation: np.ndarray) -> bool:
-        """Whether a lifted block counts as grasped: in the book's rule, wherever the fingers hold it."""
-        return True
-
     def _grasp(self) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift."""
         arm, step_simulation = self._arm, self._step_simulation
@@ -322,9 +314,8 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
 
 class KukaGraspHardEnv(KukaGraspEnv):
     """The grasp at the difficulty of ``KUKA_HARD_TASK_SPACE``: the book's six parameters, then how far
-    the block lies from the gripper's start (``obj_far``), how much of the distance shaping the reward
-    keeps (``shaping``) and how near its centre the block must be held to count (``grasp_margin``).
-    At ``obj_far`` 0, ``shaping`` 1 and ``grasp_margin`` at its upper bound a task plays exactly as in
+    the block lies from the gripper's start (``obj_far``) and how much of the distance shaping the
+    reward keeps (``shaping``). At ``obj_far`` 0 and ``shaping`` 1 a task plays exactly as in
     ``KukaGraspEnv``; the default task is the family's hardest.
     """
 
@@ -345,12 +336,6 @@ class KukaGraspHardEnv(KukaGraspEnv):
 
     def _distance_weight(self) -> float:
         return self._task["shaping"]
-
-    def _held_near_centre(self, observation: np.ndarray) -> bool:
-        """A lifted block counts only when held within ``grasp_margin`` of its centre; the parameter's
-        upper bound counts every lift, as the book does."""
-        margin = self._task["grasp_margin"]
-        return margin >= GRASP_MARGIN_ANY or abs(float(observation[HELD_OFFSET_INDEX])) <= margin
 
 
 KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}

@@ -2,7 +2,7 @@
 
 A task is a plain ``dict`` of parameter name to float. ``TaskSpace`` is generic (the teacher
 service builds spaces from HTTP requests); ``KUKA_TASK_SPACE`` is the book's six-parameter space and
-``KUKA_HARD_TASK_SPACE`` the harder family of ``KukaGraspHard-v0``: the same six plus three more.
+``KUKA_HARD_TASK_SPACE`` the harder family of ``KukaGraspHard-v0``: the same six plus two more.
 """
 
 from __future__ import annotations
@@ -174,12 +174,6 @@ KUKA_TASK_SPACE = TaskSpace(
     ]
 )
 
-GRASP_MARGIN_ANY = 0.08
-"""``grasp_margin`` at which any lift counts: no held block was seen further than 7.4 cm from the fingers."""
-GRASP_MARGIN_HARDEST = 0.02
-"""The hard family's tightest margin: it keeps ~6 in 7 of a centring controller's grasps and ~1 in 4 of
-random actions' (BENCHMARKS.md, issue 29)."""
-
 KUKA_HARD_TASK_SPACE = TaskSpace(
     [
         *KUKA_TASK_SPACE.parameters,
@@ -201,24 +195,10 @@ KUKA_HARD_TASK_SPACE = TaskSpace(
             doc="Weight of the reward's block-distance penalty: 1 is the book's reward, 0 pays the success "
             "bonus alone (less the wrist's rotation cost).",
         ),
-        Parameter(
-            "grasp_margin",
-            GRASP_MARGIN_HARDEST,
-            GRASP_MARGIN_ANY,
-            hardest=GRASP_MARGIN_HARDEST,
-            easiest=GRASP_MARGIN_ANY,
-            doc="How far from its centre (metres, along its 10 cm length) the fingers may hold the lifted "
-            f"block for a success; {GRASP_MARGIN_ANY} counts every lift, the book's rule.",
-        ),
     ]
 )
 
-KUKA_HARD_BOOK_HARDEST: Task = {
-    **KUKA_TASK_SPACE.hardest(),
-    "obj_far": 0.0,
-    "shaping": 1.0,
-    "grasp_margin": GRASP_MARGIN_ANY,
-}
+KUKA_HARD_BOOK_HARDEST: Task = {**KUKA_TASK_SPACE.hardest(), "obj_far": 0.0, "shaping": 1.0}
 """The book's hardest task (its evaluation setting) as a point of the hard family."""
 
 TASK_SPACES: dict[str, TaskSpace] = {ENV_ID: KUKA_TASK_SPACE, HARD_ENV_ID: KUKA_HARD_TASK_SPACE}
