@@ -27,7 +27,7 @@ import numpy as np
 
 from common import ENV_IDS, HARD_ENV_ID
 from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.task_space import KUKA_HARD_BOOK_HARDEST, Task, task_space_for
+from common.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, Task, task_space_for
 from learner.stats import wilson_interval
 
 POLICIES = ("zero", "random", "scripted")
@@ -92,7 +92,8 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[t
 def points(env_id: str) -> dict[str, Task]:
     """The family's easiest and hardest points, the book's hardest where it is a point of the family,
     and points in between: every parameter a share of the way from its easiest to its hardest value,
-    then the hard family's two new parameters walked alone from the book's hardest."""
+    then the hard family's placement and speed walked alone from the book's hardest (``shaping``
+    changes the returns only, not whether a fixed policy succeeds)."""
     space = task_space_for(env_id)
     easiest, hardest = space.easiest(), space.hardest()
     named = {"easiest": easiest}
@@ -103,9 +104,10 @@ def points(env_id: str) -> dict[str, Task]:
     if env_id == HARD_ENV_ID:
         book = KUKA_HARD_BOOK_HARDEST
         named["book's hardest"] = book
-        for share in (0.25, 0.5, 0.75, 1.0):
+        for share in (0.5, 1.0):
             named[f"book's hardest, obj_far={share:g}"] = {**book, "obj_far": share}
-        named["book's hardest, shaping=0"] = {**book, "shaping": 0.0}
+        for scale in (0.5, MOVE_SCALE_HARDEST):
+            named[f"book's hardest, move_scale={scale:g}"] = {**book, "move_scale": scale}
     named["hardest"] = hardest
     return named
 

@@ -11,8 +11,9 @@ scene is loaded once and snapshotted; a reset restores the snapshot in under a m
 of reloading every model (tens of milliseconds), with the same trajectories.
 
 ``KukaGraspHard-v0`` (``KukaGraspHardEnv``) is a harder family around the book's task, for which the
-book's hardest task needs no curriculum: two more parameters move the block far from where the
-gripper starts and fade out the reward's distance shaping (``common.task_space.KUKA_HARD_TASK_SPACE``).
+book's hardest task needs no curriculum: three more parameters move the block far from where the
+gripper starts, fade out the reward's distance shaping and slow the gripper's x/y moves, so that
+actions without a purpose no longer reach the block (``common.task_space.KUKA_HARD_TASK_SPACE``).
 """
 
 from __future__ import annotations
@@ -175,7 +176,8 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         dx, dy, dyaw = np.clip(action, -1.0, 1.0).tolist()
         dyaw *= YAW_PER_ACTION
-        self._arm.apply(dx * MOVE_PER_ACTION, dy * MOVE_PER_ACTION, -DESCENT_PER_STEP, dyaw, FINGER_OPENING)
+        move = self._move_per_action()
+        self._arm.apply(dx * move, dy * move, -DESCENT_PER_STEP, dyaw, FINGER_OPENING)
         self._step_simulation()
         self._steps += 1
 
@@ -258,6 +260,10 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """Weight of the block-distance penalty in the reward: the book's reward keeps all of it."""
         return 1.0
 
+    def _move_per_action(self) -> float:
+        """How far (metres) a full x or y action moves the gripper's target in one step."""
+        return MOVE_PER_ACTION
+
     def _grasp(self) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift."""
         arm, step_simulation = self._arm, self._step_simulation
@@ -314,9 +320,10 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
 
 class KukaGraspHardEnv(KukaGraspEnv):
     """The grasp at the difficulty of ``KUKA_HARD_TASK_SPACE``: the book's six parameters, then how far
-    the block lies from the gripper's start (``obj_far``) and how much of the distance shaping the
-    reward keeps (``shaping``). At ``obj_far`` 0 and ``shaping`` 1 a task plays exactly as in
-    ``KukaGraspEnv``; the default task is the family's hardest.
+    the block lies from the gripper's start (``obj_far``), how much of the distance shaping the reward
+    keeps (``shaping``) and how far an action moves the gripper (``move_scale``). At ``obj_far`` 0 and
+    ``shaping`` and ``move_scale`` 1 a task plays exactly as in ``KukaGraspEnv``; the default task is
+    the family's hardest.
     """
 
     task_space = KUKA_HARD_TASK_SPACE
@@ -336,6 +343,9 @@ class KukaGraspHardEnv(KukaGraspEnv):
 
     def _distance_weight(self) -> float:
         return self._task["shaping"]
+
+    def _move_per_action(self) -> float:
+        return MOVE_PER_ACTION * self._task["move_scale"]
 
 
 KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}

@@ -2,7 +2,7 @@
 
 A task is a plain ``dict`` of parameter name to float. ``TaskSpace`` is generic (the teacher
 service builds spaces from HTTP requests); ``KUKA_TASK_SPACE`` is the book's six-parameter space and
-``KUKA_HARD_TASK_SPACE`` the harder family of ``KukaGraspHard-v0``: the same six plus two more.
+``KUKA_HARD_TASK_SPACE`` the harder family of ``KukaGraspHard-v0``: the same six plus three more.
 """
 
 from __future__ import annotations
@@ -174,6 +174,10 @@ KUKA_TASK_SPACE = TaskSpace(
     ]
 )
 
+MOVE_SCALE_HARDEST = 0.1
+"""The hard family's slowest gripper: 0.5 mm per step at full action, 20 cm in 400 of the ~800 steps
+its descent takes from the book's hardest start."""
+
 KUKA_HARD_TASK_SPACE = TaskSpace(
     [
         *KUKA_TASK_SPACE.parameters,
@@ -195,10 +199,19 @@ KUKA_HARD_TASK_SPACE = TaskSpace(
             doc="Weight of the reward's block-distance penalty: 1 is the book's reward, 0 pays the success "
             "bonus alone (less the wrist's rotation cost).",
         ),
+        Parameter(
+            "move_scale",
+            MOVE_SCALE_HARDEST,
+            1.0,
+            hardest=MOVE_SCALE_HARDEST,
+            easiest=1.0,
+            doc="Share of the book's 5 mm per step that a full x or y action moves the gripper: at 0.1 a "
+            "random walk spreads about 1 cm over an episode, while steady moves still cross the tray.",
+        ),
     ]
 )
 
-KUKA_HARD_BOOK_HARDEST: Task = {**KUKA_TASK_SPACE.hardest(), "obj_far": 0.0, "shaping": 1.0}
+KUKA_HARD_BOOK_HARDEST: Task = {**KUKA_TASK_SPACE.hardest(), "obj_far": 0.0, "shaping": 1.0, "move_scale": 1.0}
 """The book's hardest task (its evaluation setting) as a point of the hard family."""
 
 TASK_SPACES: dict[str, TaskSpace] = {ENV_ID: KUKA_TASK_SPACE, HARD_ENV_ID: KUKA_HARD_TASK_SPACE}

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
 OUT=${OUT:-runs/hard-screen}
 ENV_ID=KukaGraspHard-v0
-EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1}'
+EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1,"move_scale":1}'
 mkdir -p "$OUT"
 
 train() {  # NAME TEACHER STEPS SEED [extra train flags...]
@@ -36,8 +36,8 @@ evaluate() {  # NAME TASK: the final policy on 100 episodes of a task, once
     echo "$(date -u +%FT%TZ) $name: $(tail -n 1 "$OUT/$name.log")"
 }
 
-train easiest-seed100 fixed 300000 100 --teacher-param "point=$EASIEST"
 train fixed-hardest-seed100 fixed 3000000 100
+train easiest-seed100 fixed 150000 100 --teacher-param "point=$EASIEST"
 train fixed-hardest-seed101 fixed 3000000 101
 evaluate easiest-seed100 easiest
 evaluate fixed-hardest-seed100 hardest

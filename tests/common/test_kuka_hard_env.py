@@ -1,4 +1,5 @@
-"""``KukaGraspHard-v0``: the book's task as one point of it, far placements, fading shaping, its task space."""
+"""``KukaGraspHard-v0``: the book's task as one point of it, far placements, fading shaping, a slower gripper,
+its task space."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from common.task_space import (
     KUKA_HARD_BOOK_HARDEST,
     KUKA_HARD_TASK_SPACE,
     KUKA_TASK_SPACE,
+    MOVE_SCALE_HARDEST,
     task_space_for,
 )
 
@@ -71,12 +73,14 @@ def test_registered_with_its_own_task_space_and_the_hardest_task_by_default():
         task_space_for("KukaGrasp-v9")
 
 
-def test_the_space_keeps_the_books_six_parameters_and_adds_two():
+def test_the_space_keeps_the_books_six_parameters_and_adds_three():
     assert KUKA_HARD_TASK_SPACE.parameters[:6] == KUKA_TASK_SPACE.parameters
-    assert KUKA_HARD_TASK_SPACE.names[6:] == ("obj_far", "shaping")
-    assert {**KUKA_TASK_SPACE.hardest(), "obj_far": 1.0, "shaping": 0.0} == HARDEST
-    assert {**KUKA_TASK_SPACE.easiest(), "obj_far": 0.0, "shaping": 1.0} == EASIEST
-    assert {**KUKA_TASK_SPACE.hardest(), "obj_far": 0.0, "shaping": 1.0} == KUKA_HARD_BOOK_HARDEST
+    assert KUKA_HARD_TASK_SPACE.names[6:] == ("obj_far", "shaping", "move_scale")
+    hardest_new = {"obj_far": 1.0, "shaping": 0.0, "move_scale": MOVE_SCALE_HARDEST}
+    easiest_new = {"obj_far": 0.0, "shaping": 1.0, "move_scale": 1.0}
+    assert {**KUKA_TASK_SPACE.hardest(), **hardest_new} == HARDEST
+    assert {**KUKA_TASK_SPACE.easiest(), **easiest_new} == EASIEST
+    assert {**KUKA_TASK_SPACE.hardest(), **easiest_new} == KUKA_HARD_BOOK_HARDEST
 
 
 @pytest.mark.parametrize(
@@ -142,12 +146,28 @@ def test_shaping_scales_the_distance_penalty_and_zero_leaves_the_success_bonus_a
     assert info["is_success"] and 9.0 < reward <= 10.0
 
 
+def test_move_scale_slows_the_grippers_moves_and_nothing_else(env):
+    """The arm's target moves move_scale times as far for the same actions; the wrist turns as fast."""
+    moves = {}
+    for scale in (1.0, 0.5, MOVE_SCALE_HARDEST):
+        env.reset(seed=0, options={"task": {**KUKA_HARD_BOOK_HARDEST, "move_scale": scale}})
+        start = np.array(env._arm.target[:2])
+        for _ in range(20):
+            env.step(np.array([0.5, 1.0, 0.3], dtype=np.float32))
+        moves[scale] = (np.array(env._arm.target[:2]) - start, env._arm.wrist_yaw)
+    for scale in (0.5, MOVE_SCALE_HARDEST):
+        assert np.allclose(moves[scale][0], scale * moves[1.0][0], atol=1e-12)
+        assert moves[scale][1] == moves[1.0][1]
+    assert np.allclose(moves[1.0][0], [20 * 0.5 * 0.005, 20 * 0.005])
+
+
 @pytest.mark.parametrize(
     ("make", "bad_task", "named"),
     [
         (KukaGraspHardEnv, {name: value for name, value in HARDEST.items() if name != "shaping"}, "shaping"),
         (KukaGraspHardEnv, {**HARDEST, "obj_far": 1.5}, "obj_far"),
         (KukaGraspHardEnv, {**HARDEST, "shaping": math.nan}, "shaping"),
+        (KukaGraspHardEnv, {**HARDEST, "move_scale": 0.05}, "move_scale"),
         (KukaGraspEnv, HARDEST, "obj_far"),
     ],
 )
