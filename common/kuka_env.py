@@ -9,6 +9,11 @@ the arm starts.
 Each environment owns a DIRECT-mode physics client, so any number can live in one process. The
 scene is loaded once and snapshotted; a reset restores the snapshot in under a millisecond instead
 of reloading every model (tens of milliseconds), with the same trajectories.
+
+``KukaGraspHard-v0`` (``KukaGraspHardEnv``) is a harder family around the book's task, for which the
+book's hardest task needs no curriculum: three more parameters move the block far from where the
+gripper starts, fade out the reward's distance shaping and slow the gripper's x/y moves, so that
+actions without a purpose no longer reach the block (``common.task_space.KUKA_HARD_TASK_SPACE``).
 """
 
 from __future__ import annotations
@@ -23,9 +28,10 @@ import numpy as np
 import pybullet_data
 from gymnasium import spaces
 
+from common import ENV_ID, HARD_ENV_ID
 from common.bullet import direct_client, pybullet
 from common.kuka_arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
-from common.task_space import KUKA_TASK_SPACE, Task
+from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE, Task, TaskSpace
 
 TIME_STEP = 1.0 / 240.0
 SOLVER_ITERATIONS = 150
@@ -59,6 +65,18 @@ SUCCESS_BONUS = 10000.0
 ROTATION_PENALTY = 10.0
 REWARD_SCALE = 1.0 / 1000.0  # the book's scaling: a success is worth about +10
 
+FAR_X_RANGE = (0.45, 0.70)
+FAR_Y_RANGE = (-0.12, 0.22)
+"""Where the hard family's far blocks may lie: the tray within the gripper's reach. That is its target box,
+widened in x by half the block's length, which a grasp may hang over, and cut at y = -0.12: beyond it the
+arm nears the tray's wall and a controller that sees the block grasps it half as often (BENCHMARKS.md)."""
+FAR_CENTRE = (0.532, 0.0)
+"""The gripper's x and y at the book's default start pose."""
+FAR_MIN_DISTANCE = 0.16
+"""A far block lies at least this far (metres) from ``FAR_CENTRE``; random actions rarely end there."""
+FAR_CANDIDATES = 64
+"""Uniform draws per far placement, the first far enough is kept (all 64 fail with probability ~1e-12)."""
+
 CAMERA_TARGET = (0.4, 0.0, 0.1)
 CAMERA_DISTANCE = 1.4
 CAMERA_YAW = 55.0
@@ -74,6 +92,8 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     the environment uses the hardest task, the book's evaluation setting.
     """
 
+    task_space: TaskSpace = KUKA_TASK_SPACE
+    """The parameters a task sets; a task outside it is refused."""
     metadata = {"render_modes": ["rgb_array"], "render_fps": 240}  # one step is 1/240 s of physics
     observation_space: spaces.Box
     action_space: spaces.Box
@@ -104,7 +124,7 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self.render_width = render_width
         self.render_height = render_height
         self.reload_on_reset = reload_on_reset
-        self._task: Task = KUKA_TASK_SPACE.validate(task) if task is not None else KUKA_TASK_SPACE.hardest()
+        self._task: Task = self.task_space.validate(task) if task is not None else self.task_space.hardest()
 
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         bound = np.array([WORLD_BOUND] * 3 + [math.pi] * 3 + [WORLD_BOUND] * 2 + [math.pi], dtype=np.float32)
@@ -137,7 +157,7 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         if options:
             raise ValueError(f"unknown reset option(s) {sorted(options)}; the only option is 'task'")
         if new_task is not None:
-            self._task = KUKA_TASK_SPACE.validate(new_task)
+            self._task = self.task_space.validate(new_task)
         super().reset(seed=seed)
 
         if self.reload_on_reset:
@@ -156,7 +176,8 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         dx, dy, dyaw = np.clip(action, -1.0, 1.0).tolist()
         dyaw *= YAW_PER_ACTION
-        self._arm.apply(dx * MOVE_PER_ACTION, dy * MOVE_PER_ACTION, -DESCENT_PER_STEP, dyaw, FINGER_OPENING)
+        move = self._move_per_action()
+        self._arm.apply(dx * move, dy * move, -DESCENT_PER_STEP, dyaw, FINGER_OPENING)
         self._step_simulation()
         self._steps += 1
 
@@ -165,10 +186,10 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             self._grasp()
         observation, block_z = self._observe()
         success = block_z > SUCCESS_BLOCK_Z
+        shaping = self._distance_weight()
+        distance = self._block_to_end_effector_distance() if shaping else 0.0
         reward = (
-            -DISTANCE_PENALTY * self._block_to_end_effector_distance()
-            + SUCCESS_BONUS * success
-            - ROTATION_PENALTY * abs(dyaw)
+            -DISTANCE_PENALTY * shaping * distance + SUCCESS_BONUS * success - ROTATION_PENALTY * abs(dyaw)
         ) * REWARD_SCALE
         truncated = not terminated and self._steps >= self.max_steps
         return observation, reward, terminated, truncated, {"is_success": success}
@@ -222,14 +243,26 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._tray_zone = (tuple(v - reach for v in tray_low), tuple(v + reach for v in tray_high))
 
     def _place_block(self) -> None:
-        """Book's placement: each ``rnd_*`` scales the share of the random range used."""
+        x, y, yaw = self._placement()
+        orientation = self._client.getQuaternionFromEuler((0.0, 0.0, yaw))
+        self._client.resetBasePositionAndOrientation(self._block, (x, y, BLOCK_Z), orientation)
+
+    def _placement(self) -> tuple[float, float, float]:
+        """Book's placement (x, y, yaw): each ``rnd_*`` scales the share of the random range used."""
         task = self._task
         u_x, u_y, u_yaw = self.np_random.random(3)
         x = 0.55 + 0.12 * u_x * task["rnd_obj_x"]
         y = task["bias_obj_y"] + 0.2 * u_y * task["rnd_obj_y"]
         yaw = 0.5 * math.pi + math.pi * u_yaw * task["rnd_obj_ang"]
-        orientation = self._client.getQuaternionFromEuler((0.0, 0.0, yaw))
-        self._client.resetBasePositionAndOrientation(self._block, (x, y, BLOCK_Z), orientation)
+        return x, y, yaw
+
+    def _distance_weight(self) -> float:
+        """Weight of the block-distance penalty in the reward: the book's reward keeps all of it."""
+        return 1.0
+
+    def _move_per_action(self) -> float:
+        """How far (metres) a full x or y action moves the gripper's target in one step."""
+        return MOVE_PER_ACTION
 
     def _grasp(self) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift."""
@@ -283,3 +316,46 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             dtype=np.float32,
         )
         return observation, block_position[2]
+
+
+class KukaGraspHardEnv(KukaGraspEnv):
+    """The grasp at the difficulty of ``KUKA_HARD_TASK_SPACE``: the book's six parameters, then how far
+    the block lies from the gripper's start (``obj_far``), how much of the distance shaping the reward
+    keeps (``shaping``) and how far an action moves the gripper (``move_scale``). At ``obj_far`` 0 and
+    ``shaping`` and ``move_scale`` 1 a task plays exactly as in ``KukaGraspEnv``; the default task is
+    the family's hardest.
+    """
+
+    task_space = KUKA_HARD_TASK_SPACE
+
+    def _placement(self) -> tuple[float, float, float]:
+        """The book's placement moved a share ``obj_far`` of the way to a uniform far point; the far
+        point is drawn after the book's draws, so ``obj_far`` 0 places the block as the book does."""
+        x, y, yaw = super()._placement()
+        low = np.array([FAR_X_RANGE[0], FAR_Y_RANGE[0]])
+        high = np.array([FAR_X_RANGE[1], FAR_Y_RANGE[1]])
+        candidates = low + (high - low) * self.np_random.random((FAR_CANDIDATES, 2))
+        distances = np.hypot(candidates[:, 0] - FAR_CENTRE[0], candidates[:, 1] - FAR_CENTRE[1])
+        far_enough = np.flatnonzero(distances >= FAR_MIN_DISTANCE)
+        far_x, far_y = candidates[far_enough[0] if far_enough.size else int(np.argmax(distances))]
+        share = self._task["obj_far"]
+        return x + share * (float(far_x) - x), y + share * (float(far_y) - y), yaw
+
+    def _distance_weight(self) -> float:
+        return self._task["shaping"]
+
+    def _move_per_action(self) -> float:
+        return MOVE_PER_ACTION * self._task["move_scale"]
+
+
+KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}
+"""The environment class of each registered id."""
+
+
+def make_kuka_env(env_id: str, **kwargs: Any) -> KukaGraspEnv:
+    """A bare environment of a registered id (no gymnasium wrappers): what workers and evaluations step."""
+    try:
+        env_class = KUKA_ENVS[env_id]
+    except KeyError:
+        raise ValueError(f"unknown environment {env_id!r}; expected one of {', '.join(KUKA_ENVS)}") from None
+    return env_class(**kwargs)

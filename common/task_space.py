@@ -1,7 +1,8 @@
 """The curriculum task space: named, bounded parameters that set an episode's difficulty.
 
 A task is a plain ``dict`` of parameter name to float. ``TaskSpace`` is generic (the teacher
-service builds spaces from HTTP requests); ``KUKA_TASK_SPACE`` is the book's six-parameter space.
+service builds spaces from HTTP requests); ``KUKA_TASK_SPACE`` is the book's six-parameter space and
+``KUKA_HARD_TASK_SPACE`` the harder family of ``KukaGraspHard-v0``: the same six plus three more.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
+
+from common import ENV_ID, HARD_ENV_ID
 
 Task = dict[str, float]
 
@@ -170,3 +173,54 @@ KUKA_TASK_SPACE = TaskSpace(
         ),
     ]
 )
+
+MOVE_SCALE_HARDEST = 0.1
+"""The hard family's slowest gripper: 0.5 mm per step at full action, 20 cm in 400 of the ~800 steps
+its descent takes from the book's hardest start."""
+
+KUKA_HARD_TASK_SPACE = TaskSpace(
+    [
+        *KUKA_TASK_SPACE.parameters,
+        Parameter(
+            "obj_far",
+            0.0,
+            1.0,
+            hardest=1.0,
+            easiest=0.0,
+            doc="Share of the way from the book's placement to a uniform point of the reachable tray far from "
+            "the gripper's start (common.kuka_env.FAR_MIN_DISTANCE or more).",
+        ),
+        Parameter(
+            "shaping",
+            0.0,
+            1.0,
+            hardest=0.0,
+            easiest=1.0,
+            doc="Weight of the reward's block-distance penalty: 1 is the book's reward, 0 pays the success "
+            "bonus alone (less the wrist's rotation cost).",
+        ),
+        Parameter(
+            "move_scale",
+            MOVE_SCALE_HARDEST,
+            1.0,
+            hardest=MOVE_SCALE_HARDEST,
+            easiest=1.0,
+            doc="Share of the book's 5 mm per step that a full x or y action moves the gripper: at 0.1 a "
+            "random walk spreads about 1 cm over an episode, while steady moves still cross the tray.",
+        ),
+    ]
+)
+
+KUKA_HARD_BOOK_HARDEST: Task = {**KUKA_TASK_SPACE.hardest(), "obj_far": 0.0, "shaping": 1.0, "move_scale": 1.0}
+"""The book's hardest task (its evaluation setting) as a point of the hard family."""
+
+TASK_SPACES: dict[str, TaskSpace] = {ENV_ID: KUKA_TASK_SPACE, HARD_ENV_ID: KUKA_HARD_TASK_SPACE}
+"""Each registered KUKA environment's task space, by gymnasium id."""
+
+
+def task_space_for(env_id: str) -> TaskSpace:
+    """The task space of a registered KUKA environment; ``ValueError`` names the known ids."""
+    try:
+        return TASK_SPACES[env_id]
+    except KeyError:
+        raise ValueError(f"unknown environment {env_id!r}; expected one of {', '.join(TASK_SPACES)}") from None

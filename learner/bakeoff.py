@@ -26,8 +26,9 @@ from typing import Any, cast
 import numpy as np
 from tqdm import tqdm
 
+from common import ENV_ID, ENV_IDS
 from common.schemas import TeacherKind
-from common.task_space import KUKA_TASK_SPACE
+from common.task_space import task_space_for
 from learner.arguments import add_override_flags, int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.config import LOOPS, TrainConfig
@@ -60,6 +61,7 @@ LEARNING_CURVES = "learning_curves.png"
 POLL_S = 1.0
 
 TRAINING_FLAGS = {
+    "env": "--env",
     "workers": "--workers",
     "envs_per_worker": "--envs-per-worker",
     "rollout_length": "--rollout-length",
@@ -72,7 +74,7 @@ TRAINING_FLAGS = {
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
 REPEATED_FLAGS = {"teacher_params": "--teacher-param", "ppo": "--ppo"}
 """Bake-off options given as NAME=VALUE pairs, handed to every run as one flag per pair."""
-ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}}
+ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID}
 """Settings newer than some stored bake-offs, with the value their runs were trained with."""
 SUCCESS_TARGET = 0.8
 """The success rate on the hardest task whose first crossing the report times."""
@@ -218,16 +220,22 @@ def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_
     return True
 
 
-def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None) -> EvaluationResult:
-    """The final policy on the hardest task, cached with the checkpoint it came from."""
+def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_id: str = ENV_ID) -> EvaluationResult:
+    """The final policy on its environment's hardest task, cached with the checkpoint it came from."""
     checkpoint = latest_checkpoint(run.directory)
     assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
     cache = run.directory / EVALUATION_FILE
     if cache.exists():
         cached = json.loads(cache.read_text(encoding="utf-8"))
-        if cached["checkpoint"] == checkpoint.name and cached["episodes"] == episodes and cached["seed"] == seed:
+        if (
+            cached["checkpoint"] == checkpoint.name
+            and cached["episodes"] == episodes
+            and cached["seed"] == seed
+            and cached.get("env", ENV_ID) == env_id
+        ):
             return EvaluationResult.from_dict(cached)
-    result = evaluate_checkpoint(load_checkpoint(checkpoint), KUKA_TASK_SPACE.hardest(), episodes, seed, processes)
+    task = task_space_for(env_id).hardest()
+    result = evaluate_checkpoint(load_checkpoint(checkpoint), task, episodes, seed, processes)
     write_json(cache, {"checkpoint": checkpoint.name, **result.to_dict()})
     return result
 
@@ -267,6 +275,8 @@ class TeacherResult:
     teacher: str
     runs: tuple[Run, ...]
     evaluations: tuple[EvaluationResult, ...]
+    env: str = ENV_ID
+    """The environment the runs trained and were evaluated on."""
 
     @property
     def returns(self) -> Interval:
@@ -310,7 +320,7 @@ class TeacherResult:
             "median_steps_to_success": median_steps(self.seed_steps_to_success),
             "return": self.returns.to_dict(),
             "success_rate": self.success_rate.to_dict(),
-            "book_return": BOOK_RETURNS.get(self.teacher),
+            "book_return": BOOK_RETURNS.get(self.teacher) if self.env == ENV_ID else None,
             "runs": [
                 {
                     "seed": run.seed,
@@ -366,12 +376,16 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         if (params := registration_params(result.teacher, settings))
     )
     seeds = max(len(result.runs) for result in results)
+    env = settings.get("env", ENV_ID)
+    # The book's returns were measured on its own task: they say nothing of another family's hardest.
+    book_returns = BOOK_RETURNS if env == ENV_ID else {}
+    hardest = "the hardest task" if env == ENV_ID else f"the hardest task of {env}"
     lines = [
         "# Teacher bake-off on the hardest task",
         "",
         f"Each teacher trained {seeds} seed{'s' if seeds > 1 else ''} for {settings['total_steps']:_} environment "
         f"steps with the same settings ({trained}) and hyperparameters. Each final policy then played "
-        f"{episodes} deterministic episodes on the hardest task (episode seeds {seed} to {seed + episodes - 1}, "
+        f"{episodes} deterministic episodes on {hardest} (episode seeds {seed} to {seed + episodes - 1}, "
         "the same for every run).",
         *(
             [f"Teachers registered with these parameters on top of their own defaults: {registered}."]
@@ -409,7 +423,7 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
     ]
     for result in results:
         success = result.success_rate
-        book = BOOK_RETURNS.get(result.teacher)
+        book = book_returns.get(result.teacher)
         per_seed = ", ".join(f"{value:.2f}" for value in result.seed_returns)
         lines.append(
             f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_return(result.returns)} "
@@ -480,7 +494,8 @@ def write_reports(
         {
             "settings": settings,
             "evaluation": {
-                "task": KUKA_TASK_SPACE.hardest(),
+                "env": settings.get("env", ENV_ID),
+                "task": task_space_for(settings.get("env", ENV_ID)).hardest(),
                 "episodes": episodes,
                 "seed": seed,
                 "confidence": CONFIDENCE,
@@ -519,6 +534,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     evaluation.add_argument("--eval-seed", type=int, default=0, help="episode i is seeded eval-seed + i (default 0)")
     evaluation.add_argument("--eval-processes", type=positive_int, help="evaluation processes (default: one per CPU)")
     training = parser.add_argument_group("training, the same for every run")
+    training.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        default=defaults.env,
+        help=f"task family; each run's final evaluation is its hardest task (default {defaults.env})",
+    )
     training.add_argument(
         "--workers", type=positive_int, default=defaults.workers, help=f"rollout actors (default {defaults.workers})"
     )
@@ -621,10 +642,10 @@ def _bakeoff(args: argparse.Namespace) -> int:
         teacher_runs = tuple(run for run in runs if run.teacher == teacher)
         evaluations = []
         for run in teacher_runs:
-            evaluation = evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes)
+            evaluation = evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
             print(f"{run.name}: {evaluation.summary()}")
             evaluations.append(evaluation)
-        results.append(TeacherResult(teacher, teacher_runs, tuple(evaluations)))
+        results.append(TeacherResult(teacher, teacher_runs, tuple(evaluations), args.env))
     write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed)
     for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES):
         print(args.out / name)

@@ -21,6 +21,7 @@ from typing import Any
 
 from pydantic import SecretStr
 
+from common import ENV_IDS
 from common.write_token import TOKEN_VARIABLE, token_problem
 from learner.arguments import add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
@@ -43,6 +44,12 @@ class UsageError(Exception):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     run = parser.add_argument_group("run")
     run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
+    run.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        help=f"task family: the environment and its task space, whose hardest task is evaluated "
+        f"(default {DEFAULTS.env})",
+    )
     run.add_argument(
         "--total-steps", type=positive_int, help=f"environment steps to train for (default {DEFAULTS.total_steps:_})"
     )
@@ -106,6 +113,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 _RUN_SETTINGS = (
     "teacher",
+    "env",
     "total_steps",
     "workers",
     "envs_per_worker",
@@ -166,6 +174,11 @@ def _train(args: argparse.Namespace) -> int:
         config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if checkpoint is not None and config.env != checkpoint.config.env:
+        raise UsageError(
+            f"the run in {args.run_dir} trains on {checkpoint.config.env}; "
+            f"choose another --run-dir for a run on {config.env}"
+        )
     run_dir = args.run_dir or Path("runs") / f"{config.teacher}-{time.strftime('%Y%m%d-%H%M%S')}"
     if checkpoint is None and latest_checkpoint(run_dir) is not None:
         raise UsageError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
@@ -216,14 +229,14 @@ def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str
 
 
 def _register_curriculum(url: str, name: str, config: TrainConfig, token: SecretStr | None) -> None:
-    from common.task_space import KUKA_TASK_SPACE
+    from common.task_space import task_space_for
     from common.teacher_client import TeacherClient, TeacherClientError
 
     with TeacherClient(url, name, token=token) as client:
         try:
             client.register(
                 config.teacher,
-                KUKA_TASK_SPACE,
+                task_space_for(config.env),
                 params=config.teacher_params,
                 seed=config.seed,
                 timeout=TEACHER_CONNECT_TIMEOUT_S,

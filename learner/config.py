@@ -11,6 +11,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
+from common import ENV_ID, ENV_IDS
+
 if TYPE_CHECKING:
     from common.schemas import TeacherKind
 
@@ -122,6 +124,8 @@ part of the test's range, and without them one seed in three ended under 80% (BE
 class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
     """Curriculum teacher: alp-gmm, manual (the book's lesson plan), random (uniform) or fixed (hardest task)."""
+    env: str = ENV_ID
+    """Task family: KukaGrasp-v0 (the book's six parameters) or KukaGraspHard-v0 (those and two harder ones)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
     workers: int = 2
@@ -147,6 +151,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         _require(self.teacher in TEACHERS, f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
+        _require(self.env in ENV_IDS, f"env must be one of {', '.join(ENV_IDS)}, got {self.env!r}")
         _require(self.total_steps >= 1, "total_steps must be at least 1")
         _require(self.workers >= 1, "workers must be at least 1")
         _require(self.envs_per_worker >= 1, "envs_per_worker must be at least 1")

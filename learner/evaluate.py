@@ -1,6 +1,7 @@
 """``kuka-curriculum evaluate``: how good is a checkpoint, with error bars.
 
-The deterministic policy (the Gaussian's mean) plays a fixed number of episodes on one task.
+The deterministic policy (the Gaussian's mean) plays a fixed number of episodes on one task of the
+environment it was trained on (the checkpoint records it; ``--task`` names a point of its task space).
 Episode ``i`` is seeded ``seed + i`` and the results are put back in episode order, so the figures
 depend on the checkpoint, the task and the seed only, never on how many processes shared the work.
 Processes are plain CPU workers (no Ray, no teacher): evaluation must work on a laptop with
@@ -25,9 +26,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from common.kuka_env import KukaGraspEnv
+from common import ENV_ID
+from common.kuka_env import KukaGraspEnv, make_kuka_env
 from common.policy import InferencePolicy, PolicySnapshot
-from common.task_space import KUKA_TASK_SPACE, Task
+from common.task_space import KUKA_TASK_SPACE, Task, TaskSpace, task_space_for
 from common.trajectory import EpisodeStats
 from learner.arguments import positive_int
 from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
@@ -37,8 +39,9 @@ from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 
 TASK_HELP = (
-    "'hardest' (the book's evaluation setting), 'easiest', or name=value overrides on the hardest task, "
-    "e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to override the easiest one)"
+    "'hardest' (the evaluation setting of the checkpoint's environment; for KukaGrasp-v0 the book's), 'easiest', "
+    "or name=value overrides on the hardest task, e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to "
+    "override the easiest one)"
 )
 
 
@@ -46,22 +49,22 @@ class UsageError(Exception):
     """Bad input: reported in one line, exit code 2."""
 
 
-def parse_task(text: str) -> Task:
-    """A task from the command line: an anchor name, optionally followed by ``name=value`` overrides."""
+def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE) -> Task:
+    """A task of ``space`` from the command line: an anchor name, optionally followed by ``name=value`` overrides."""
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
         raise ValueError(f"empty task; expected {TASK_HELP}")
-    base = KUKA_TASK_SPACE.hardest()
+    base = space.hardest()
     if "=" not in items[0]:
         anchor = items.pop(0)
         if anchor not in ("hardest", "easiest"):
             raise ValueError(f"unknown task {anchor!r}; expected {TASK_HELP}")
-        base = KUKA_TASK_SPACE.hardest() if anchor == "hardest" else KUKA_TASK_SPACE.easiest()
+        base = space.hardest() if anchor == "hardest" else space.easiest()
     overrides: dict[str, float] = {}
     for item in items:
         name, separator, value = (part.strip() for part in item.partition("="))
         if not separator or not name:
-            names = ", ".join(KUKA_TASK_SPACE.names)
+            names = ", ".join(space.names)
             raise ValueError(f"bad task item {item!r}: expected name=value; names are {names}")
         if name in overrides:
             raise ValueError(f"task parameter {name!r} is given twice")
@@ -69,20 +72,21 @@ def parse_task(text: str) -> Task:
             overrides[name] = float(value)
         except ValueError:
             raise ValueError(f"task parameter {name!r} must be a number, got {value!r}") from None
-    return KUKA_TASK_SPACE.validate({**base, **overrides})
+    return space.validate({**base, **overrides})
 
 
-def task_argument(text: str) -> Task:
-    """``parse_task`` for argparse, so a bad task is reported as a usage error."""
+def checkpoint_task(text: str, checkpoint: Checkpoint) -> Task:
+    """``parse_task`` in the task space of the environment the checkpoint was trained on; a bad task
+    is a usage error."""
     try:
-        return parse_task(text)
+        return parse_task(text, task_space_for(checkpoint.config.env))
     except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+        raise UsageError(f"--task: {error}") from None
 
 
-def describe_task(task: Task) -> str:
+def describe_task(task: Task, space: TaskSpace = KUKA_TASK_SPACE) -> str:
     """'hardest task', or the nearer anchor and what differs from it: 'easiest task with jp2=1'."""
-    anchors = {name: getattr(KUKA_TASK_SPACE, name)() for name in ("hardest", "easiest")}
+    anchors = {name: getattr(space, name)() for name in ("hardest", "easiest")}
     changes = {
         name: [f"{key}={value:g}" for key, value in task.items() if value != anchor[key]]
         for name, anchor in anchors.items()
@@ -119,6 +123,8 @@ class EvaluationResult:
     task: Task
     seed: int
     episodes: tuple[EpisodeStats, ...]
+    env: str = ENV_ID
+    """The environment the episodes were played in; ``task`` is a point of its task space."""
 
     @property
     def returns(self) -> Interval:
@@ -136,14 +142,19 @@ class EvaluationResult:
         returns, success = self.returns, self.success_rate
         spread = "n/a" if math.isnan(returns.half_width) else f"{returns.half_width:.2f}"
         return (
-            f"{describe_task(self.task)}, {len(self.episodes)} episodes: "
+            f"{self._where()}{describe_task(self.task, task_space_for(self.env))}, {len(self.episodes)} episodes: "
             f"return {returns.estimate:.2f} ± {spread} ({CONFIDENCE:.0%} CI), "
             f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson {CONFIDENCE:.0%}), "
             f"mean length {self.mean_length:.0f}"
         )
 
+    def _where(self) -> str:
+        """The environment, named where it is not the default one."""
+        return "" if self.env == ENV_ID else f"{self.env}, "
+
     def to_dict(self) -> dict[str, Any]:
         return {
+            "env": self.env,
             "task": self.task,
             "seed": self.seed,
             "episodes": len(self.episodes),
@@ -160,7 +171,8 @@ class EvaluationResult:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvaluationResult:
-        task = KUKA_TASK_SPACE.validate(data["task"])
+        env = str(data.get("env", ENV_ID))  # results from before the hard family were all KukaGrasp-v0's
+        task = task_space_for(env).validate(data["task"])
         per_episode = data["per_episode"]
         episodes = tuple(
             EpisodeStats(task=task, reward=float(reward), success=bool(success), length=int(length))
@@ -168,7 +180,7 @@ class EvaluationResult:
                 per_episode["return"], per_episode["success"], per_episode["length"], strict=True
             )
         )
-        return cls(task=task, seed=int(data["seed"]), episodes=episodes)
+        return cls(task=task, seed=int(data["seed"]), episodes=episodes, env=env)
 
 
 def available_cpus() -> int:
@@ -180,10 +192,10 @@ _worker: tuple[KukaGraspEnv, InferencePolicy, Task] | None = None
 """Each pool process's environment, policy and task, built once by ``_start_worker``."""
 
 
-def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int) -> None:
+def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int, env_id: str) -> None:
     global _worker
     torch.set_num_threads(1)
-    _worker = (KukaGraspEnv(max_steps=max_episode_steps), InferencePolicy(snapshot), task)
+    _worker = (make_kuka_env(env_id, max_steps=max_episode_steps), InferencePolicy(snapshot), task)
 
 
 def _play_episode(seed: int) -> EpisodeStats:
@@ -200,8 +212,9 @@ def evaluate_policy(
     processes: int | None = None,
     max_episode_steps: int = 1000,
     progress: bool = True,
+    env_id: str = ENV_ID,
 ) -> EvaluationResult:
-    """Play ``episodes`` deterministic episodes, seeded ``seed``, ``seed + 1``, ...
+    """Play ``episodes`` deterministic episodes of ``env_id``, seeded ``seed``, ``seed + 1``, ...
 
     ``processes=None`` uses one process per available CPU (at most one per episode); with one,
     the episodes run in this process.
@@ -210,13 +223,13 @@ def evaluate_policy(
         raise ValueError(f"episodes must be at least 1, got {episodes}")
     if processes is not None and processes < 1:
         raise ValueError(f"processes must be at least 1, got {processes}")
-    task = KUKA_TASK_SPACE.validate(task)
+    task = task_space_for(env_id).validate(task)
     processes = min(processes or available_cpus(), episodes)
     seeds = [seed + index for index in range(episodes)]
     results: list[EpisodeStats | None] = [None] * episodes
     with tqdm(total=episodes, desc="evaluating", unit="episode", disable=not progress, dynamic_ncols=True) as bar:
         if processes == 1:
-            env, policy = KukaGraspEnv(max_steps=max_episode_steps), InferencePolicy(snapshot)
+            env, policy = make_kuka_env(env_id, max_steps=max_episode_steps), InferencePolicy(snapshot)
             for index, episode_seed in enumerate(seeds):
                 results[index] = run_episodes(env, policy, task, [episode_seed])[0]
                 bar.update()
@@ -227,14 +240,14 @@ def evaluate_policy(
                 processes,
                 mp_context=get_context("spawn"),
                 initializer=_start_worker,
-                initargs=(snapshot, task, max_episode_steps),
+                initargs=(snapshot, task, max_episode_steps, env_id),
             ) as pool:
                 futures = {pool.submit(_play_episode, episode_seed): index for index, episode_seed in enumerate(seeds)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
     # Every index was filled above: the loop or the pool answered each seed.
-    return EvaluationResult(task=task, seed=seed, episodes=tuple(cast(list[EpisodeStats], results)))
+    return EvaluationResult(task=task, seed=seed, episodes=tuple(cast(list[EpisodeStats], results)), env=env_id)
 
 
 def evaluate_checkpoint(
@@ -246,7 +259,8 @@ def evaluate_checkpoint(
     max_episode_steps: int | None = None,
     progress: bool = True,
 ) -> EvaluationResult:
-    """``evaluate_policy`` on a checkpoint, with its run's episode limit unless one is given."""
+    """``evaluate_policy`` on a checkpoint, in the environment it was trained on, with its run's episode
+    limit unless one is given."""
     return evaluate_policy(
         policy_snapshot(checkpoint),
         task,
@@ -255,6 +269,7 @@ def evaluate_checkpoint(
         processes,
         max_episode_steps or checkpoint.config.max_episode_steps,
         progress,
+        checkpoint.config.env,
     )
 
 
@@ -266,7 +281,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a checkpoint file, or a run directory (its latest checkpoint)",
     )
     parser.add_argument("--episodes", type=positive_int, default=100, help="episodes to play (default 100)")
-    parser.add_argument("--task", type=task_argument, default=KUKA_TASK_SPACE.hardest(), help=TASK_HELP)
+    parser.add_argument("--task", default="hardest", help=TASK_HELP)
     parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i (default 0)")
     parser.add_argument(
         "--processes", type=positive_int, help=f"worker processes (default: one per CPU, here {available_cpus()})"
@@ -282,12 +297,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         checkpoint = read_checkpoint(args.checkpoint)
+        task = checkpoint_task(args.task, checkpoint)
     except UsageError as error:
         print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
         return 2
-    result = evaluate_checkpoint(
-        checkpoint, args.task, args.episodes, args.seed, args.processes, args.max_episode_steps
-    )
+    result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
     print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
     print(result.summary())
     if args.json is not None:

@@ -1,4 +1,4 @@
-"""Periodic evaluation: the deterministic policy on the hardest task, over a fixed set of seeds.
+"""Periodic evaluation: the deterministic policy on its task family's hardest task, over a fixed set of seeds.
 
 The seeds never change during a run, so successive evaluations differ only by the policy.
 """
@@ -9,13 +9,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from common.task_space import KUKA_TASK_SPACE
+from common.task_space import Task, task_space_for
 from common.trajectory import EpisodeStats
 
-EVALUATION_TASK = KUKA_TASK_SPACE.hardest()
-"""The book's evaluation setting."""
 EVALUATION_SEED_OFFSET = 10_000
 """Evaluation seeds are EVALUATION_SEED_OFFSET + 0, 1, 2, ..."""
+
+
+def evaluation_task(env_id: str) -> Task:
+    """The hardest task of the environment's family; for ``KukaGrasp-v0`` the book's evaluation setting."""
+    return task_space_for(env_id).hardest()
 
 
 def evaluation_seeds(episodes: int) -> list[int]:

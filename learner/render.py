@@ -19,11 +19,12 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
-from common.kuka_env import KukaGraspEnv
+from common import ENV_ID
+from common.kuka_env import KukaGraspEnv, make_kuka_env
 from common.policy import InferencePolicy, PolicySnapshot
-from common.task_space import KUKA_TASK_SPACE, Task
+from common.task_space import Task
 from learner.arguments import positive_int
-from learner.evaluate import TASK_HELP, UsageError, policy_snapshot, read_checkpoint, task_argument
+from learner.evaluate import TASK_HELP, UsageError, checkpoint_task, policy_snapshot, read_checkpoint
 
 STEPS_PER_FRAME = 8
 """A step is 1/240 s of physics: one frame in eight plays at real speed (30 frames per second)."""
@@ -83,11 +84,12 @@ def film_episodes(
     seed: int = 0,
     max_episode_steps: int = 1000,
     progress: bool = True,
+    env_id: str = ENV_ID,
 ) -> list[np.ndarray]:
-    """Labelled frames of ``episodes`` deterministic episodes, one frame per ``STEPS_PER_FRAME`` steps."""
+    """Labelled frames of ``episodes`` deterministic episodes of ``env_id``, one frame per ``STEPS_PER_FRAME`` steps."""
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
-    env = KukaGraspEnv(render_mode="rgb_array", max_steps=max_episode_steps, task=task)
+    env = make_kuka_env(env_id, render_mode="rgb_array", max_steps=max_episode_steps, task=task)
     policy = InferencePolicy(snapshot)
     low, high = env.action_space.low, env.action_space.high
     hold = round(HOLD_LAST_FRAME_S * FRAMES_PER_SECOND)
@@ -137,7 +139,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the video to write (.mp4 needs imageio-ffmpeg)",
     )
     parser.add_argument("--episodes", type=positive_int, default=3, help="episodes to film (default 3)")
-    parser.add_argument("--task", type=task_argument, default=KUKA_TASK_SPACE.hardest(), help=TASK_HELP)
+    parser.add_argument("--task", default="hardest", help=TASK_HELP)
     parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i, as in evaluate (default 0)")
     parser.add_argument(
         "--max-episode-steps",
@@ -150,15 +152,17 @@ def run(args: argparse.Namespace) -> int:
     try:
         check_output(args.out)
         checkpoint = read_checkpoint(args.checkpoint)
+        task = checkpoint_task(args.task, checkpoint)
     except UsageError as error:
         print(f"kuka-curriculum render: error: {error}", file=sys.stderr)
         return 2
     frames = film_episodes(
         policy_snapshot(checkpoint),
-        args.task,
+        task,
         args.episodes,
         args.seed,
         args.max_episode_steps or checkpoint.config.max_episode_steps,
+        env_id=checkpoint.config.env,
     )
     write_video(args.out, frames)
     print(args.out)

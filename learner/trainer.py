@@ -35,7 +35,7 @@ from common.policy import PolicySnapshot
 from common.trajectory import EpisodeStats, TrajectoryBatch
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
-from learner.evaluation import EVALUATION_TASK, evaluation_metrics, evaluation_seeds
+from learner.evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
 from learner.metrics import MetricsLog
 from learner.network import kuka_policy_spec
 from learner.ppo import PPOLearner
@@ -103,6 +103,7 @@ class Trainer:
             rollout_length=self.config.ppo.rollout_length,
             max_episode_steps=self.config.max_episode_steps,
             teacher_token=self.teacher_token,
+            env_id=self.config.env,
         )
         # Resumed runs draw fresh environment seeds instead of replaying the first run's.
         pool_seed = int(np.random.SeedSequence([self.config.seed, self.counters.iteration]).generate_state(1)[0])
@@ -229,7 +230,7 @@ class _IterationLoop:
         if self.evaluation is not None:
             self._collect_evaluation()  # still running: one at a time, in order
         episodes = self.pool.start_evaluation(
-            snapshot_ref, EVALUATION_TASK, evaluation_seeds(self.config.eval_episodes)
+            snapshot_ref, evaluation_task(self.config.env), evaluation_seeds(self.config.eval_episodes)
         )
         self.evaluation = _Evaluation(episodes, self.held[-1][1], time.perf_counter())
 

@@ -14,7 +14,8 @@ import ray
 import torch
 from pydantic import SecretStr
 
-from common.kuka_env import KukaGraspEnv
+from common import ENV_ID
+from common.kuka_env import KukaGraspEnv, make_kuka_env
 from common.policy import InferencePolicy, PolicySnapshot
 from common.task_space import Task
 from common.teacher_client import Assignment, TeacherClient
@@ -37,6 +38,8 @@ class WorkerSettings:
     max_episode_steps: int
     teacher_token: SecretStr | None = None
     """Held as a ``SecretStr`` so that no repr or log line of the settings shows it."""
+    env_id: str = ENV_ID
+    """The registered environment the workers step (``common.ENV_IDS``)."""
 
 
 class _TeacherTasks:
@@ -70,7 +73,7 @@ class RolloutWorker:
             prefetch=2 * settings.num_envs,
             task_timeout=TASK_TIMEOUT_S,
         )
-        envs = [KukaGraspEnv(max_steps=settings.max_episode_steps) for _ in range(settings.num_envs)]
+        envs = [make_kuka_env(settings.env_id, max_steps=settings.max_episode_steps) for _ in range(settings.num_envs)]
         self.sampler = Sampler(envs, _TeacherTasks(self.client), seed)
         self.evaluation_env: KukaGraspEnv | None = None
         self.policy: InferencePolicy | None = None
@@ -88,7 +91,7 @@ class RolloutWorker:
     def evaluate(self, snapshot: PolicySnapshot, task: Task, seeds: Sequence[int]) -> list[EpisodeStats]:
         """Deterministic episodes on environments of their own, so training episodes are not disturbed."""
         if self.evaluation_env is None:
-            self.evaluation_env = KukaGraspEnv(max_steps=self.settings.max_episode_steps)
+            self.evaluation_env = make_kuka_env(self.settings.env_id, max_steps=self.settings.max_episode_steps)
         return run_episodes(self.evaluation_env, self._load(snapshot), task, seeds)
 
     def close(self) -> None:

@@ -33,6 +33,7 @@ import yaml
 from common.cli import COMMANDS
 from learner.cli import PUBLIC_URL_VARIABLE
 from learner.cli import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
+from learner.config import TrainConfig
 from teacher_service.core.config import Settings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -394,14 +395,22 @@ def test_environment_names_are_read_by_the_programs(
 def test_env_file_drives_the_training_run(
     tmp_path: Path, env_example: dict[str, str], services: dict[str, dict[str, Any]]
 ) -> None:
-    chosen = {"TEACHER": "manual", "TOTAL_STEPS": "12345", "ROLLOUT_WORKERS": "6", "ENVS_PER_WORKER": "3", "SEED": "7"}
+    chosen = {
+        "TEACHER": "manual",
+        "ENV": "KukaGraspHard-v0",
+        "TOTAL_STEPS": "12345",
+        "ROLLOUT_WORKERS": "6",
+        "ENVS_PER_WORKER": "3",
+        "SEED": "7",
+    }
     assert set(chosen) <= set(env_example), ".env.example should list every setting a user is expected to change"
     env_file = tmp_path / "custom.env"
     env_file.write_text("".join(f"{name}={value}\n" for name, value in {**env_example, **chosen}.items()))
 
     train = parse_kuka_curriculum(command_of(load_compose(env_file)["services"]["learner"], "kuka-curriculum", "train"))
-    assert (train.teacher, train.total_steps, train.workers, train.envs_per_worker, train.seed) == (
+    assert (train.teacher, train.env, train.total_steps, train.workers, train.envs_per_worker, train.seed) == (
         "manual",
+        "KukaGraspHard-v0",
         12345,
         6,
         3,
@@ -410,6 +419,7 @@ def test_env_file_drives_the_training_run(
 
     defaults = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
     assert defaults.teacher == env_example["TEACHER"]
+    assert defaults.env == env_example["ENV"] == TrainConfig().env
 
 
 # --- Dockerfile ------------------------------------------------------------------------------------

@@ -7,8 +7,9 @@ import json
 import imageio.v3 as iio
 import pytest
 
+from common import HARD_ENV_ID
 from common.cli import main
-from common.task_space import KUKA_TASK_SPACE
+from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from common.trajectory import EpisodeStats
 from learner.bakeoff import (
     BOOK_RETURNS,
@@ -104,6 +105,26 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # Other hyperparameters in the same directory would make an unfair comparison.
     assert bakeoff("--teachers", "fixed", "--total-steps", str(2 * BATCH), "--rollout-length", "64") == 2
     assert "rollout_length: 128 before, 64 now" in capsys.readouterr().err
+
+
+def test_a_bakeoff_on_the_hard_family_trains_and_evaluates_there(tmp_path, ray_cluster, capsys):
+    out = tmp_path / "bakeoff-hard"
+    flags = ["bakeoff", "--out", str(out), "--ray-address", ray_cluster, *TINY, "--teachers", "fixed"]
+    assert main([*flags, "--env", HARD_ENV_ID, "--total-steps", str(BATCH)]) == 0
+    (run,) = plan_runs(out, ["fixed"], seeds=1)
+    assert load_checkpoint(latest_checkpoint(run.directory)).config.env == HARD_ENV_ID
+    hardest = KUKA_HARD_TASK_SPACE.hardest()
+    assert json.loads((run.directory / "evaluation.json").read_text())["task"] == hardest
+    results = json.loads((out / "results.json").read_text())
+    assert results["evaluation"]["env"] == HARD_ENV_ID and results["evaluation"]["task"] == hardest
+    assert results["teachers"][0]["book_return"] is None, "the book measured its own task, not this one"
+    table = (out / "results.md").read_text()
+    assert f"on the hardest task of {HARD_ENV_ID}" in table and f"| {BOOK_RETURNS['fixed']:.2f} |" not in table
+    capsys.readouterr()
+
+    # The runs in one directory share their task family.
+    assert main([*flags, "--total-steps", str(2 * BATCH)]) == 2
+    assert f"env: '{HARD_ENV_ID}' before, 'KukaGrasp-v0' now" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

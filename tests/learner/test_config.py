@@ -18,10 +18,18 @@ def test_a_config_saved_before_angle_features_existed_loads_as_trained_on_raw_an
     assert TrainConfig().ppo.angle_features is True
 
 
+def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_books_environment():
+    saved = TrainConfig(env="KukaGraspHard-v0").to_dict()
+    assert TrainConfig.from_dict(saved).env == "KukaGraspHard-v0"
+    del saved["env"]
+    assert TrainConfig.from_dict(saved).env == "KukaGrasp-v0" == TrainConfig().env
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [
         (lambda: TrainConfig(teacher="curious"), "teacher must be one of"),
+        (lambda: TrainConfig(env="KukaGrasp-v9"), "env must be one of KukaGrasp-v0, KukaGraspHard-v0"),
         (lambda: TrainConfig(workers=0), "workers"),
         (lambda: TrainConfig(total_steps=0), "total_steps"),
         (lambda: PPOConfig(gamma=1.5), "gamma"),

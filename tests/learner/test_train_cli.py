@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import time
 
 import pytest
 
 from common.cli import main
+from common.task_space import KUKA_TASK_SPACE
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import TrainConfig
 from learner.network import kuka_policy_spec
@@ -103,3 +105,30 @@ def test_a_guessable_teacher_token_is_refused_before_anything_starts(tmp_path, c
     assert error.startswith("kuka-curriculum train: error: KC_TEACHER_TOKEN ") and reason in error
     assert "secrets.token_urlsafe(32)" in error
     assert not (tmp_path / "run").exists(), "the refusal came after the run started"
+
+
+def test_an_unknown_environment_is_refused_by_name(capsys):
+    with pytest.raises(SystemExit) as stopped:
+        main(["train", "--env", "KukaGrasp-v9"])
+    assert stopped.value.code == 2
+    assert "--env: invalid choice: 'KukaGrasp-v9'" in capsys.readouterr().err
+
+
+def test_a_run_keeps_its_environment_when_resumed(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    config = TrainConfig()
+    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
+    assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), "--env", "KukaGraspHard-v0"]) == 2
+    assert "trains on KukaGrasp-v0; choose another --run-dir for a run on KukaGraspHard-v0" in capsys.readouterr().err
+
+
+def test_the_hard_family_registers_its_own_task_space(tmp_path, capsys):
+    """The teacher sees all nine parameters: a fixed point given in the book's six is refused for lacking the rest."""
+    run_dir = tmp_path / "run"
+    book_point = json.dumps(KUKA_TASK_SPACE.hardest())
+    flags = ["--env", "KukaGraspHard-v0", "--teacher", "fixed", "--teacher-param", f"point={book_point}"]
+    assert main(["train", *flags, "--run-dir", str(run_dir)]) == 2
+    error = capsys.readouterr().err
+    assert "cannot register curriculum 'run'" in error
+    assert all(name in error for name in ("obj_far", "shaping", "move_scale"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from common import ENV_ID
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import PPOConfig, TrainConfig
 from learner.network import kuka_policy_spec
@@ -12,9 +13,13 @@ from learner.ppo import PPOLearner
 TINY_EPISODE_STEPS = 40
 
 
-def save_untrained_checkpoint(run_dir: Path, seed: int = 0) -> Path:
+def save_untrained_checkpoint(run_dir: Path, seed: int = 0, env: str = ENV_ID) -> Path:
     config = TrainConfig(
-        teacher="fixed", seed=seed, max_episode_steps=TINY_EPISODE_STEPS, ppo=PPOConfig(hidden_sizes=(16, 16))
+        teacher="fixed",
+        env=env,
+        seed=seed,
+        max_episode_steps=TINY_EPISODE_STEPS,
+        ppo=PPOConfig(hidden_sizes=(16, 16)),
     )
     learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed)
     return save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=512, episodes=4), config)

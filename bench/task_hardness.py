@@ -1,0 +1,170 @@
+"""How hard each point of a KUKA task family is for policies that learn nothing: the figures that say
+whether the reward can be found by chance.
+
+Three fixed policies play the same episodes (episode ``i`` is seeded ``seed + i``) on several points
+of the family, from the easiest to the hardest:
+- ``zero``: no action; the gripper descends where it starts;
+- ``random``: uniform random actions, as an untrained explorer;
+- ``scripted``: a hand-made controller that reads only the observation, moves the gripper over the
+  block and turns the wrist across it: it shows the point can be solved, not how well PPO can.
+
+    .venv/bin/python bench/task_hardness.py --env KukaGraspHard-v0 --episodes 1000 --processes 2
+
+Prints, per point and policy, the success rate (Wilson 95% interval), the mean return and the mean
+episode length; ``--json`` also writes them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from common import ENV_IDS, HARD_ENV_ID
+from common.kuka_env import KukaGraspEnv, make_kuka_env
+from common.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, Task, task_space_for
+from learner.stats import wilson_interval
+
+POLICIES = ("zero", "random", "scripted")
+CHUNK = 50
+"""Episodes per unit of work handed to a process."""
+SCRIPT_GAIN = 100.0
+"""Scripted controller: action per metre of x/y offset (saturates beyond 1 cm)."""
+SCRIPT_YAW_GAIN = 5.0
+"""Scripted controller: wrist action per radian of misalignment."""
+
+Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+
+
+def scripted_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Move over the block and turn the fingers across it, from the observation alone.
+
+    The block's offset in the gripper's frame (entries 6 and 7) maps to the world by the gripper's yaw
+    (entry 5), the gripper pointing down; the fingers close across the block when its yaw in the
+    gripper's frame (entry 8) is pi/2, modulo pi.
+    """
+    yaw, block_x, block_y, block_yaw = (float(value) for value in observation[5:9])
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    world_dx, world_dy = cos * block_x + sin * block_y, sin * block_x - cos * block_y
+    misalignment = (block_yaw - math.pi / 2 + math.pi / 2) % math.pi - math.pi / 2
+    action = np.array([SCRIPT_GAIN * world_dx, SCRIPT_GAIN * world_dy, SCRIPT_YAW_GAIN * misalignment])
+    return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+
+def _zero_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return np.zeros(3, dtype=np.float32)
+
+
+def _random_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return rng.uniform(-1.0, 1.0, size=3).astype(np.float32)
+
+
+POLICY_FUNCTIONS: dict[str, Policy] = {"zero": _zero_action, "random": _random_action, "scripted": scripted_action}
+
+
+def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, float, int]:
+    """One episode: (success, return, length)."""
+    act = POLICY_FUNCTIONS[policy]
+    rng = np.random.default_rng(seed)
+    observation, _ = env.reset(seed=seed, options={"task": task})
+    total, length = 0.0, 0
+    while True:
+        observation, reward, terminated, truncated, info = env.step(act(observation, rng))
+        total += reward
+        length += 1
+        if terminated or truncated:
+            return bool(info["is_success"]), total, length
+
+
+def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[tuple[bool, float, int]]:
+    env = make_kuka_env(env_id)
+    try:
+        return [play(env, task, policy, seed) for seed in seeds]
+    finally:
+        env.close()
+
+
+def points(env_id: str) -> dict[str, Task]:
+    """The family's easiest and hardest points, the book's hardest where it is a point of the family,
+    and points in between: every parameter a share of the way from its easiest to its hardest value,
+    then the hard family's placement and speed walked alone from the book's hardest (``shaping``
+    changes the returns only, not whether a fixed policy succeeds)."""
+    space = task_space_for(env_id)
+    easiest, hardest = space.easiest(), space.hardest()
+    named = {"easiest": easiest}
+    for share in (0.25, 0.5, 0.75):
+        named[f"all {share:.0%} of the way"] = {
+            name: easiest[name] + share * (hardest[name] - easiest[name]) for name in space.names
+        }
+    if env_id == HARD_ENV_ID:
+        book = KUKA_HARD_BOOK_HARDEST
+        named["book's hardest"] = book
+        for share in (0.5, 1.0):
+            named[f"book's hardest, obj_far={share:g}"] = {**book, "obj_far": share}
+        for scale in (0.5, MOVE_SCALE_HARDEST):
+            named[f"book's hardest, move_scale={scale:g}"] = {**book, "move_scale": scale}
+    named["hardest"] = hardest
+    return named
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", choices=ENV_IDS, default=HARD_ENV_ID, help=f"task family (default {HARD_ENV_ID})")
+    parser.add_argument("--episodes", type=int, default=1000, help="episodes per point and policy (default 1000)")
+    parser.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i (default 0)")
+    parser.add_argument("--policies", nargs="+", choices=POLICIES, default=list(POLICIES))
+    parser.add_argument("--points", nargs="+", help="only these points (default: all; names as printed)")
+    parser.add_argument("--processes", type=int, default=1, help="worker processes (default 1)")
+    parser.add_argument("--json", type=Path, help="also write the figures here")
+    args = parser.parse_args()
+
+    chosen = points(args.env)
+    if args.points:
+        unknown = sorted(set(args.points) - set(chosen))
+        if unknown:
+            parser.error(f"unknown point(s) {unknown}; known: {list(chosen)}")
+        chosen = {name: chosen[name] for name in args.points}
+    seeds = [args.seed + index for index in range(args.episodes)]
+    chunks = [seeds[start : start + CHUNK] for start in range(0, len(seeds), CHUNK)]
+    jobs = [(name, policy) for name in chosen for policy in args.policies]
+    report = []
+    with ProcessPoolExecutor(max_workers=args.processes) as pool:
+        futures = {
+            (name, policy): [pool.submit(play_chunk, args.env, chosen[name], policy, chunk) for chunk in chunks]
+            for name, policy in jobs
+        }
+        print(f"{args.env}, {args.episodes} episodes per point and policy, episode seeds {seeds[0]} to {seeds[-1]}")
+        for (name, policy), parts in futures.items():
+            episodes = [episode for part in parts for episode in part.result()]
+            successes = sum(success for success, _, _ in episodes)
+            interval = wilson_interval(successes, len(episodes))
+            mean_return = float(np.mean([total for _, total, _ in episodes]))
+            mean_length = float(np.mean([length for _, _, length in episodes]))
+            print(
+                f"{name:32s} {policy:8s} success {interval.estimate:6.1%} [{interval.low:.1%}, {interval.high:.1%}]"
+                f"  return {mean_return:6.2f}  length {mean_length:5.0f}",
+                flush=True,
+            )
+            report.append(
+                {
+                    "point": name,
+                    "task": chosen[name],
+                    "policy": policy,
+                    "episodes": len(episodes),
+                    "successes": successes,
+                    "success_rate": interval.to_dict(),
+                    "mean_return": mean_return,
+                    "mean_length": mean_length,
+                }
+            )
+    if args.json is not None:
+        args.json.write_text(json.dumps({"env": args.env, "seed": args.seed, "results": report}, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Issue 29, part 1: the screening runs that say whether KukaGraspHard-v0's hardest task is hard for PPO
+# without a curriculum, and whether its easiest point is quickly learnt. One run at a time (a run uses
+# both cores); each resumes from its latest checkpoint, so running this again finishes what is left.
+# Training seeds 100+ and final evaluation episode seeds 20000+: the bake-off trains seeds 0 to 4 and
+# evaluates on episode seeds 100000+, so none of these is reused there. The last run, ALP-GMM with
+# train's defaults, is a probe of whether a curriculum gets anywhere, not a bake-off result.
+#
+#   setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen.sh > runs/hard-screen/driver.log 2>&1 &
+#
+# Variables: PYTHON (default .venv/bin/python), OUT (default runs/hard-screen).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+PYTHON=${PYTHON:-.venv/bin/python}
+OUT=${OUT:-runs/hard-screen}
+ENV_ID=KukaGraspHard-v0
+EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1,"move_scale":1}'
+mkdir -p "$OUT"
+
+train() {  # NAME TEACHER STEPS SEED [extra train flags...]
+    local name=$1 teacher=$2 steps=$3 seed=$4
+    shift 4
+    echo "$(date -u +%FT%TZ) $name: training to $steps steps"
+    "$PYTHON" -m common.cli train --env "$ENV_ID" --teacher "$teacher" --seed "$seed" --total-steps "$steps" \
+        --eval-episodes 20 --run-dir "$OUT/$name" --resume-if-exists "$@" >> "$OUT/$name.log" 2>&1
+    echo "$(date -u +%FT%TZ) $name: done"
+}
+
+evaluate() {  # NAME TASK: the final policy on 100 episodes of a task, once
+    local name=$1 task=$2 json="$OUT/$1/evaluation-$2.json"
+    if [ ! -f "$json" ]; then
+        "$PYTHON" -m common.cli evaluate "$OUT/$name" --task "$task" --episodes 100 --seed 20000 --processes 2 \
+            --json "$json.partial" >> "$OUT/$name.log" 2>&1
+        mv "$json.partial" "$json"
+    fi
+    echo "$(date -u +%FT%TZ) $name: $(tail -n 1 "$OUT/$name.log")"
+}
+
+train fixed-hardest-seed100 fixed 3000000 100
+train easiest-seed100 fixed 150000 100 --teacher-param "point=$EASIEST"
+train fixed-hardest-seed101 fixed 3000000 101
+evaluate easiest-seed100 easiest
+evaluate fixed-hardest-seed100 hardest
+evaluate fixed-hardest-seed101 hardest
+# Not a result for the bake-off, a probe for it: does train's default teacher get anywhere here?
+train alp-gmm-seed100 alp-gmm 3000000 100
+evaluate alp-gmm-seed100 hardest
+echo "$(date -u +%FT%TZ) all screening runs done"
