@@ -34,8 +34,11 @@ from teacher_service.process import ServiceProcess  # noqa: E402
 KINDS = ("alp-gmm", "manual", "random", "fixed")
 ABANDON_SHARE = 0.05
 """Share of drawn tasks whose episode is 'lost' and never reported."""
-NEW_CURRICULUM_EVERY_S = 30.0
-"""How often a client moves to a curriculum it registers anew (the mix of registrations)."""
+MOVE_EVERY_S = 30.0
+"""How often a client moves to another of its curricula, registering it (again: a PUT of the same
+curriculum is idempotent), so registrations go on all through the soak."""
+CURRICULA_PER_CLIENT = 3
+"""Each client's curricula: a fixed set, so that memory can level off once each is in use."""
 EPISODE_TIME_S = 0.02
 """What one batch of episodes 'takes' between a draw and its report."""
 SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
@@ -94,14 +97,15 @@ async def _run_client(number: int, url: str, tally: Tally, deadline: float, prog
     rng = random.Random(number)
     async with httpx.AsyncClient(base_url=url, timeout=10.0) as client:
         generation = 0
-        name = f"soak-{KINDS[number % len(KINDS)]}-{number}-{generation}"
-        await _register(client, tally, name, KINDS[number % len(KINDS)], number)
+        kind = KINDS[number % len(KINDS)]
+        name = f"soak-{kind}-{number}-0"
+        await _register(client, tally, name, kind, number)
         moved_at = time.monotonic()
         unreported: list[dict[str, object]] = []
         while unreported or time.monotonic() < deadline:
-            if time.monotonic() - moved_at > NEW_CURRICULUM_EVERY_S and not unreported:
-                generation += 1
-                kind = rng.choice(KINDS)
+            if time.monotonic() - moved_at > MOVE_EVERY_S and not unreported:
+                generation = (generation + 1) % CURRICULA_PER_CLIENT
+                kind = KINDS[(number + generation) % len(KINDS)]
                 name = f"soak-{kind}-{number}-{generation}"
                 await _register(client, tally, name, kind, number)
                 moved_at = time.monotonic()
@@ -202,7 +206,7 @@ def main() -> None:
     lost = tally.acknowledged - stored
     latencies = np.concatenate([np.array(values) for values in tally.latencies.values()])
     print(f"\nsoak: {args.clients} clients, {args.minutes:g} min, one SIGKILL and restart half-way")
-    print(f"curricula registered: {tally.registrations}")
+    print(f"registrations (PUT): {tally.registrations}, curricula: at most {args.clients * CURRICULA_PER_CLIENT}")
     print(f"results sent: {tally.sent}, acknowledged: {len(tally.acknowledged)}, stored: {len(stored)}")
     print(f"acknowledged but not stored: {len(lost)}; tasks abandoned (never reported): {tally.abandoned}")
     print(f"restart to first /healthz answer: {outcome['restart_s']:.2f} s")

@@ -397,7 +397,7 @@ def test_env_file_drives_the_training_run(
 ) -> None:
     chosen = {
         "TEACHER": "manual",
-        "ENV": "KukaGraspHard-v0",
+        "KUKA_ENV": "KukaGraspHard-v0",
         "TOTAL_STEPS": "12345",
         "ROLLOUT_WORKERS": "6",
         "ENVS_PER_WORKER": "3",
@@ -419,7 +419,7 @@ def test_env_file_drives_the_training_run(
 
     defaults = parse_kuka_curriculum(command_of(services["learner"], "kuka-curriculum", "train"))
     assert defaults.teacher == env_example["TEACHER"]
-    assert defaults.env == env_example["ENV"] == TrainConfig().env
+    assert defaults.env == env_example["KUKA_ENV"] == TrainConfig().env
 
 
 # --- Dockerfile ------------------------------------------------------------------------------------
