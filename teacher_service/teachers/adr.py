@@ -37,7 +37,7 @@ from pydantic import Field, model_validator
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
+from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
 from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
 
 RECENT_MOVES = 200
@@ -90,13 +90,7 @@ class AdrTeacher(Teacher):
 
     def __init__(self, space: TaskSpace, seed: int, params: AdrParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
-        if self.params.start is not None:
-            start = space.to_array(in_space("start", self.params.start, space))
-        else:
-            try:
-                start = space.to_array(space.easiest())
-            except ValueError as error:
-                raise ValueError(f"start: none given and {error}") from None
+        start = space.to_array(given_or_anchor("start", self.params.start, space, "easiest"))
         half = self.params.initial_width * (space.high - space.low) / 2
         self.initial_low = np.maximum(start - half, space.low)
         self.initial_high = np.minimum(start + half, space.high)

@@ -10,7 +10,7 @@ Checks that need the task space (a task-valued parameter lying inside it) run in
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 from typing_extensions import Self
@@ -24,7 +24,7 @@ TaskParam = Annotated[
 ]
 """A task-valued parameter; ``in_space`` checks it against the teacher's space."""
 
-__all__ = ["FiniteFloat", "TaskParam", "TeacherParams", "in_space"]
+__all__ = ["FiniteFloat", "TaskParam", "TeacherParams", "given_or_anchor", "in_space"]
 
 
 class TeacherParams(BaseModel):
@@ -44,6 +44,17 @@ class TeacherParams(BaseModel):
         if isinstance(raw, Mapping):
             return cls.model_validate(dict(raw))
         raise ValueError(f"parameters must be a mapping of name to value, got {type(raw).__name__}")
+
+
+def given_or_anchor(name: str, given: Task | None, space: TaskSpace, anchor: Literal["easiest", "hardest"]) -> Task:
+    """A task-valued parameter checked against the space, or when none was given the space's
+    ``anchor`` point; either failure names the parameter."""
+    if given is not None:
+        return in_space(name, given, space)
+    try:
+        return space.easiest() if anchor == "easiest" else space.hardest()
+    except ValueError as error:
+        raise ValueError(f"{name}: none given and {error}") from None
 
 
 def in_space(name: str, task: Task, space: TaskSpace) -> Task:

@@ -61,7 +61,7 @@ from threadpoolctl import ThreadpoolController
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
+from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
 from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
 
 MIN_SPREAD = 1e-3
@@ -311,13 +311,7 @@ class SelfPacedTeacher(Teacher):
 
     def __init__(self, space: TaskSpace, seed: int, params: SelfPacedParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
-        if self.params.start is not None:
-            start = space.to_array(in_space("start", self.params.start, space))
-        else:
-            try:
-                start = space.to_array(space.easiest())
-            except ValueError as error:
-                raise ValueError(f"start: none given and {error}") from None
+        start = space.to_array(given_or_anchor("start", self.params.start, space, "easiest"))
         dims = len(space)
         self.gaussian = Gaussian(space.to_unit(start), np.full(dims, np.log(self.params.initial_spread)))
         if self.params.target == "hardest":

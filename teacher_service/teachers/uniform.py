@@ -10,7 +10,7 @@ import numpy as np
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.params import TaskParam, TeacherParams, in_space
+from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
 
 
 class RandomParams(TeacherParams):
@@ -58,13 +58,7 @@ class FixedTeacher(Teacher):
 
     def __init__(self, space: TaskSpace, seed: int, params: FixedParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
-        if self.params.point is not None:
-            self.point = in_space("point", self.params.point, space)
-        else:
-            try:
-                self.point = space.hardest()
-            except ValueError as error:
-                raise ValueError(f"point: none given and {error}") from None
+        self.point = given_or_anchor("point", self.params.point, space, "hardest")
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         return [dict(self.point) for _ in range(count)]
