@@ -295,19 +295,29 @@ class RiacTeacher(Teacher):
         self.split_searches = int(state["split_searches"])
         self.splits = int(state["splits"])
         self.discards = int(state["discards"])
-        self._regions = [self._root()]
-        for region_id, (cutoff, cut) in enumerate(state["regions"]):
-            region = self._regions[region_id]
+        # Halves are numbered after the region they split, though not next to it: regions split in
+        # the order the results made them, so walking the ids in order meets every parent first.
+        entries = state["regions"]
+        regions: list[_Region | None] = [self._root()] + [None] * (len(entries) - 1)
+        for region_id, (cutoff, cut) in enumerate(entries):
+            region = regions[region_id]
+            if region is None:
+                raise ValueError(f"region {region_id} is not a half of any region before it")
             region.cutoff = int(cutoff)
             if cut is not None:
                 dim, threshold, lower, upper = int(cut[0]), float(cut[1]), int(cut[2]), int(cut[3])
-                if (lower, upper) != (len(self._regions), len(self._regions) + 1):
-                    raise ValueError(f"region {region_id}'s halves must come next in order, got {lower} and {upper}")
+                if not (region_id < lower < len(entries) and region_id < upper < len(entries)) or lower == upper:
+                    raise ValueError(f"region {region_id}'s halves {lower} and {upper} must be later, distinct regions")
+                if regions[lower] is not None or regions[upper] is not None:
+                    raise ValueError(f"region {region_id}'s halves {lower} and {upper} are halves of another region")
                 region.cut = (dim, threshold, lower, upper)
                 lower_high, upper_low = region.high.copy(), region.low.copy()
                 lower_high[dim] = upper_low[dim] = threshold
-                self._regions.append(_Region(region.low.copy(), lower_high, 0, region.rows))
-                self._regions.append(_Region(upper_low, region.high.copy(), 0, region.rows))
+                regions[lower] = _Region(region.low.copy(), lower_high, 0, region.rows)
+                regions[upper] = _Region(upper_low, region.high.copy(), 0, region.rows)
+        self._regions = [region for region in regions if region is not None]
+        if len(self._regions) != len(entries):
+            raise ValueError("some regions of the snapshot are halves of no region")
         self._refill()
         self._refresh_choice()
 

@@ -33,6 +33,11 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "manual": {"threshold": 0.5, "window": 5, "min_episodes": 5},
     "random": {},
     "fixed": {},
+    "covar-gmm": {"fit_rate": 16, "max_components": 3},
+    "riac": {"max_region_size": 12},
+    "adr": {"queue_length": 3, "reward_range": [0.0, 2.0]},
+    "self-paced": {"update_every": 12, "reward_range": [0.0, 2.0]},
+    "currot": {"particles": 40, "update_every": 12, "buffer_size": 40, "candidates": 8, "delta": 1.0},
 }
 SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
 
