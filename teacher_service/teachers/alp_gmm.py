@@ -103,6 +103,22 @@ class MixtureFit:
     covariances: np.ndarray
     aic_by_components: dict[int, float] = field(default_factory=dict)
 
+    @classmethod
+    def from_data(cls, data: Mapping[str, Any], width: int) -> MixtureFit:
+        """The fit that ``export_fit`` wrote as ``data``, checked to be over ``width`` coordinates."""
+        weights = np.array(data["weights"], dtype=np.float64)
+        means = np.array(data["means"], dtype=np.float64)
+        covariances = np.array(data["covariances"], dtype=np.float64)
+        components = len(weights)
+        if means.shape != (components, width) or covariances.shape != (components, width, width):
+            raise ValueError(
+                f"a mixture of {components} components over {width} coordinates needs means of shape "
+                f"{(components, width)} and covariances of shape {(components, width, width)}, "
+                f"got {means.shape} and {covariances.shape}"
+            )
+        aics = {int(k): float(aic) for k, aic in data["aic_by_components"]}
+        return cls(int(data["index"]), weights, means, covariances, aics)
+
 
 def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: int, random_state: int) -> MixtureFit:
     """Fit one mixture per candidate size and keep the lowest AIC (ties go to fewer components).
@@ -265,8 +281,9 @@ class _History:
 
 
 @dataclass(frozen=True)
-class _Sampler:
-    """An installed mixture, prepared for sampling task features (the ALP coordinate dropped)."""
+class MixtureSampler:
+    """An installed mixture, prepared for sampling task features: only the first ``task_dims``
+    coordinates are drawn, and components are picked in proportion to their ``scores``."""
 
     fit: MixtureFit
     choice_cdf: np.ndarray
@@ -274,15 +291,16 @@ class _Sampler:
     task_cholesky: np.ndarray
 
     @classmethod
-    def prepare(cls, fit: MixtureFit) -> _Sampler:
-        alp = np.clip(fit.means[:, -1], 0.0, None)
-        # The reference code picks a component uniformly when no component shows progress.
-        probabilities = alp / alp.sum() if alp.sum() > 0 else np.full(len(alp), 1.0 / len(alp))
+    def prepare(cls, fit: MixtureFit, scores: np.ndarray, task_dims: int) -> MixtureSampler:
+        """``scores`` are non-negative, one per component; the reference codes pick a component
+        uniformly when none is positive."""
+        total = scores.sum()
+        probabilities = scores / total if total > 0 else np.full(len(scores), 1.0 / len(scores))
         return cls(
             fit=fit,
             choice_cdf=np.cumsum(probabilities),
-            task_means=fit.means[:, :-1],
-            task_cholesky=np.linalg.cholesky(fit.covariances[:, :-1, :-1]),
+            task_means=fit.means[:, :task_dims],
+            task_cholesky=np.linalg.cholesky(fit.covariances[:, :task_dims, :task_dims]),
         )
 
     @property
@@ -321,7 +339,7 @@ class AlpGmmTeacher(Teacher):
             except ValueError as error:
                 raise ValueError(f"target_task_ratio needs a hardest value for every parameter: {error}") from None
         self._history = _History(len(space), self.params.buffer_size)
-        self._sampler: _Sampler | None = None
+        self._sampler: MixtureSampler | None = None
         self.fits_requested = 0
         self.fits_installed = 0
         self.origins: Counter[str] = Counter(gmm=0, uniform=0)
@@ -392,7 +410,7 @@ class AlpGmmTeacher(Teacher):
             raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
         if self._sampler is not None and fitted.index <= self._sampler.fit.index:
             raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
-        self._sampler = _Sampler.prepare(fitted)
+        self._sampler = self._prepare(fitted)
         self.fits_installed += 1
 
     def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
@@ -405,19 +423,11 @@ class AlpGmmTeacher(Teacher):
         }
 
     def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
-        width = len(self.space) + 1
-        weights = np.array(data["weights"], dtype=np.float64)
-        means = np.array(data["means"], dtype=np.float64)
-        covariances = np.array(data["covariances"], dtype=np.float64)
-        components = len(weights)
-        if means.shape != (components, width) or covariances.shape != (components, width, width):
-            raise ValueError(
-                f"a mixture of {components} components over {width} coordinates needs means of shape "
-                f"{(components, width)} and covariances of shape {(components, width, width)}, "
-                f"got {means.shape} and {covariances.shape}"
-            )
-        aics = {int(k): float(aic) for k, aic in data["aic_by_components"]}
-        return MixtureFit(int(data["index"]), weights, means, covariances, aics)
+        return MixtureFit.from_data(data, len(self.space) + 1)
+
+    def _prepare(self, fit: MixtureFit) -> MixtureSampler:
+        """Components picked by their mean ALP (the last coordinate), clipped at 0."""
+        return MixtureSampler.prepare(fit, np.clip(fit.means[:, -1], 0.0, None), len(self.space))
 
     @property
     def history_size(self) -> int:
@@ -444,7 +454,7 @@ class AlpGmmTeacher(Teacher):
         self._history.restore(history)
         self.fits_requested = int(state["fits_requested"])
         self.fits_installed = int(state["fits_installed"])
-        self._sampler = None if state["model"] is None else _Sampler.prepare(self.import_fit(state["model"]))
+        self._sampler = None if state["model"] is None else self._prepare(self.import_fit(state["model"]))
         self.origins = Counter({str(origin): int(count) for origin, count in state["origins"].items()})
         self._recent_origins.extend(str(origin) for origin in state["recent_origins"])
 

@@ -24,16 +24,22 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from common.task_space import Task, TaskSpace
-from teacher_service.teachers.alp_gmm import MAX_COMPONENTS, MAX_EM_INITS, MAX_FIT_RATE, MixtureFit, fit_mixture
+from teacher_service.teachers.alp_gmm import (
+    MAX_COMPONENTS,
+    MAX_EM_INITS,
+    MAX_FIT_RATE,
+    MixtureFit,
+    MixtureSampler,
+    fit_mixture,
+)
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
-from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms, standard_normals
+from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams
 
 
@@ -68,41 +74,6 @@ class CovarGmmParams(TeacherParams):
         return self
 
 
-@dataclass(frozen=True)
-class _Sampler:
-    """An installed mixture, prepared for sampling task features (time and reward dropped)."""
-
-    fit: MixtureFit
-    choice_cdf: np.ndarray
-    task_means: np.ndarray
-    task_cholesky: np.ndarray
-
-    @classmethod
-    def prepare(cls, fit: MixtureFit, absolute: bool) -> _Sampler:
-        covariances = fit.covariances[:, -2, -1]
-        progress = np.abs(covariances) if absolute else np.clip(covariances, 0.0, None)
-        total = progress.sum()
-        probabilities = progress / total if total > 0 else np.full(len(progress), 1.0 / len(progress))
-        return cls(
-            fit=fit,
-            choice_cdf=np.cumsum(probabilities),
-            task_means=fit.means[:, :-2],
-            task_cholesky=np.linalg.cholesky(fit.covariances[:, :-2, :-2]),
-        )
-
-    @property
-    def probabilities(self) -> np.ndarray:
-        return np.diff(self.choice_cdf, prepend=0.0)
-
-    def draw(self, choice: np.ndarray, normal_quantiles: np.ndarray) -> np.ndarray:
-        """Task features from uniforms: ``choice`` (n,) picks components, ``normal_quantiles`` (n, d)
-        become the Gaussian draw."""
-        component = np.minimum(np.searchsorted(self.choice_cdf, choice, side="right"), len(self.choice_cdf) - 1)
-        offsets = np.einsum("nij,nj->ni", self.task_cholesky[component], standard_normals(normal_quantiles))
-        features: np.ndarray = self.task_means[component] + offsets
-        return features
-
-
 class CovarGmmTeacher(Teacher):
     """Time-reward covariance teacher over a Gaussian mixture (see the module docstring)."""
 
@@ -115,7 +86,7 @@ class CovarGmmTeacher(Teacher):
         self._width = len(space) + 2
         self._rows = np.empty((2 * self.params.fit_rate, self._width))
         self._size = 0
-        self._sampler: _Sampler | None = None
+        self._sampler: MixtureSampler | None = None
         self.fits_requested = 0
         self.fits_installed = 0
 
@@ -165,7 +136,7 @@ class CovarGmmTeacher(Teacher):
             raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
         if self._sampler is not None and fitted.index <= self._sampler.fit.index:
             raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
-        self._sampler = _Sampler.prepare(fitted, self.params.absolute_progress)
+        self._sampler = self._prepare(fitted)
         self.fits_installed += 1
 
     def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
@@ -178,18 +149,14 @@ class CovarGmmTeacher(Teacher):
         }
 
     def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
-        weights = np.array(data["weights"], dtype=np.float64)
-        means = np.array(data["means"], dtype=np.float64)
-        covariances = np.array(data["covariances"], dtype=np.float64)
-        components, width = len(weights), self._width
-        if means.shape != (components, width) or covariances.shape != (components, width, width):
-            raise ValueError(
-                f"a mixture of {components} components over {width} coordinates (task, time, reward) needs "
-                f"means of shape {(components, width)} and covariances of shape {(components, width, width)}, "
-                f"got {means.shape} and {covariances.shape}"
-            )
-        aics = {int(k): float(aic) for k, aic in data["aic_by_components"]}
-        return MixtureFit(int(data["index"]), weights, means, covariances, aics)
+        return MixtureFit.from_data(data, self._width)
+
+    def _prepare(self, fit: MixtureFit) -> MixtureSampler:
+        """Components picked by their time-reward covariance: its positive part, or its size with
+        ``absolute_progress``."""
+        covariances = fit.covariances[:, -2, -1]
+        progress = np.abs(covariances) if self.params.absolute_progress else np.clip(covariances, 0.0, None)
+        return MixtureSampler.prepare(fit, progress, len(self.space))
 
     @property
     def history_size(self) -> int:
@@ -219,9 +186,7 @@ class CovarGmmTeacher(Teacher):
         self.fits_requested = int(state["fits_requested"])
         self.fits_installed = int(state["fits_installed"])
         model = state["model"]
-        self._sampler = (
-            None if model is None else _Sampler.prepare(self.import_fit(model), self.params.absolute_progress)
-        )
+        self._sampler = None if model is None else self._prepare(self.import_fit(model))
 
     def _to_features(self, tasks: np.ndarray) -> np.ndarray:
         return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)
