@@ -26,7 +26,8 @@ from teacher_service.teachers import EpisodeResult, FitJob, make_teacher
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 
 SHORT_S = 0.4
-"""A short fit's duration: B's fits must land within twice this beside A's long one."""
+"""A short fit's duration. B's fits must land within a few of these (a loaded CI machine adds
+hundreds of milliseconds of spawn and scheduling noise), far sooner than A's long fit of 30."""
 
 
 class Outcomes:
@@ -80,14 +81,14 @@ def test_a_long_fit_of_one_curriculum_does_not_hold_up_another() -> None:
                 runner.submit(name, job(0, fit_jobs.sleep_then, 0.0, None), outcomes.receiver(name))
             await outcomes.wait("a", 1)
             await outcomes.wait("b", 1)
-            runner.submit("a", job(1, fit_jobs.sleep_then, 20 * SHORT_S, None), outcomes.receiver("a"))
+            runner.submit("a", job(1, fit_jobs.sleep_then, 30 * SHORT_S, None), outcomes.receiver("a"))
             for index in range(1, 4):
                 due = time.monotonic()
                 runner.submit("b", job(index, fit_jobs.sleep_then, SHORT_S, index), outcomes.receiver("b"))
                 (*_, landed) = await outcomes.wait("b", index + 1)
                 latency = outcomes.arrived_at["b", index] - due
                 assert (landed.index, landed.error) == (index, None)
-                assert latency < 2 * SHORT_S, f"b's fit {index} landed {latency:.2f} s after it fell due"
+                assert latency < 5 * SHORT_S, f"b's fit {index} landed {latency:.2f} s after it fell due"
             assert len(outcomes.by_curriculum["a"]) == 1, "a's long fit finished: nothing was overlapped"
 
     asyncio.run(scenario())
