@@ -89,12 +89,14 @@ def _fit_forever(jobs: Queue[FitJob | None], outcomes: Queue[FitOutcome | None])
     killed service sends no word, and the queues' pipes stay open because this process holds both
     of their ends.
 
-    One BLAS thread: the mixtures are small, and a second thread spinning for work takes the core
-    that the service needs to answer requests."""
+    One BLAS and one OpenMP thread: the mixtures are small, and a second thread spinning for work
+    takes the core that the service or another curriculum's fit needs. The limits apply to the
+    libraries loaded when they are set, so the fit libraries are imported first (scikit-learn
+    brings its own OpenMP runtime, which would otherwise run k-means on every core)."""
     os.nice(FIT_NICENESS)
-    threadpool_limits(limits=1)
     for library in FIT_LIBRARIES:
         importlib.import_module(library)
+    threadpool_limits(limits=1)
     outcomes.cancel_join_thread()
     outcomes.put(None)
     service = multiprocessing.parent_process()

@@ -35,3 +35,10 @@ def exit_once(marker: str, value: object) -> object:
         Path(marker).touch()
         os._exit(3)
     return value
+
+
+def thread_pools() -> list[dict[str, object]]:
+    """The native thread pools loaded in this process (BLAS, OpenMP), with their thread counts."""
+    from threadpoolctl import threadpool_info
+
+    return threadpool_info()
