@@ -349,6 +349,7 @@ class Curriculum:
             self._snapshot_queued = False
             self._snapshot_at = snapshot.results_seen
             self._history_stored = snapshot.history_from + len(snapshot.history)
+            self.teacher.release_history(self._history_stored)
 
         def not_stored() -> None:
             self._snapshot_queued = False
@@ -415,9 +416,11 @@ class Curriculum:
         waiting: list[int] = []
         awaited_then: list[int] = []
         if stored is not None:
-            teacher.restore(stored.teacher, store.history(self.id, stored.history_rows))
+            kept_from = teacher.history_kept_from(stored.teacher)
+            teacher.restore(stored.teacher, store.history(self.id, stored.history_rows, kept_from))
             after_seq, tasks_issued, issued_through = stored.last_seq, stored.tasks_issued, stored.issued_through
             waiting, self._history_stored = stored.fits_waiting, stored.history_rows
+            teacher.release_history(self._history_stored)
             awaited_then = stored.outstanding
         later_tasks = store.tasks_from(self.id, issued_through)
         self.tasks_issued = tasks_issued + len(later_tasks)
@@ -466,6 +469,7 @@ class Curriculum:
             snapshot = self._snapshot()
             store.write_now([(INSERT_FIT, models_found), *snapshot_statements(self.id, snapshot)])
             self._snapshot_at, self._history_stored = snapshot.results_seen, teacher.history_size
+            teacher.release_history(self._history_stored)
 
     def _install_stored(self, job: FitJob, fit: StoredFit, models_found: list[tuple[Any, ...]]) -> None:
         """Install a recorded fit from its stored model; one stored without a model (by a version-1

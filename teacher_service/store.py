@@ -300,27 +300,35 @@ class Store:
             json.loads(teacher),
         )
 
-    def history(self, curriculum_id: int, rows: int) -> np.ndarray:
-        """The first ``rows`` history rows, from the chunks written with the snapshots."""
+    def history(self, curriculum_id: int, rows: int, start: int = 0) -> np.ndarray:
+        """History rows ``start`` to ``rows``, from the chunks written with the snapshots."""
         chunks = self._db.execute(
             "SELECT first_row, row_count, width, data FROM history_chunks"
-            " WHERE curriculum_id = ? AND first_row < ? ORDER BY first_row",
-            (curriculum_id, rows),
+            " WHERE curriculum_id = ? AND first_row < ? AND first_row + row_count > ? ORDER BY first_row",
+            (curriculum_id, rows, start),
         ).fetchall()
         if not chunks:
-            if rows:
-                raise StoreError(f"{self.path}: curriculum {curriculum_id} has no history chunks for {rows} rows")
+            if rows > start:
+                raise StoreError(
+                    f"{self.path}: curriculum {curriculum_id} has no history chunks for rows {start} to {rows}"
+                )
             return np.empty((0, 0))
         width = chunks[0][2]
-        history = np.empty((rows, width))
-        filled = 0
+        history = np.empty((rows - start, width))
+        filled = chunks[0][0]
+        if filled > start:
+            raise StoreError(
+                f"{self.path}: curriculum {curriculum_id}'s history chunks start at row {filled}, not {start}"
+            )
         for first_row, row_count, chunk_width, data in chunks:
             if first_row != filled or chunk_width != width or first_row + row_count > rows:
                 raise StoreError(
                     f"{self.path}: curriculum {curriculum_id}'s history chunk at row {first_row} "
                     f"({row_count} x {chunk_width}) does not follow row {filled} of {rows} x {width}"
                 )
-            history[first_row : first_row + row_count] = np.frombuffer(data, dtype="<f8").reshape(row_count, width)
+            chunk = np.frombuffer(data, dtype="<f8").reshape(row_count, width)
+            skip = max(start - first_row, 0)
+            history[first_row + skip - start : first_row + row_count - start] = chunk[skip:]
             filled += row_count
         if filled != rows:
             raise StoreError(

@@ -33,8 +33,11 @@ from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
+from teacher_service.teachers.row_log import RowLog
 
 MIN_HISTORY_FOR_ALP = 6
+MAX_HISTORY_WINDOW = 1_000_000
+"""At 9 columns for the KUKA space, about 150 MB a curriculum at most (the rows, and room to grow)."""
 """ALP is 0 until this many earlier tasks exist, as in the reference code."""
 
 RECENT_ORIGINS = 1000
@@ -63,6 +66,10 @@ class AlpGmmParams(TeacherParams):
     buffer_size: int = Field(default=500, ge=1, le=10_000)
     """Newest tasks scanned directly before joining the k-d tree that answers nearest-neighbour
     queries; affects speed only."""
+    history_window: int = Field(default=100_000, ge=10_000, le=MAX_HISTORY_WINDOW)
+    """Most recent results searched for a task's nearest earlier task (its learning progress is
+    the change in reward from there); older ones leave memory once stored. The reference keeps
+    them all: the two agree until this many results."""
     rescale_tasks: bool = True
     """Measure distances and fit mixtures on tasks rescaled to [0, 1] per dimension."""
     reward_range: Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)] | None = None
@@ -140,8 +147,8 @@ def fit_mixture(index: int, points: np.ndarray, components: range, nb_em_init: i
 
 
 TREE_GROWTH = 256
-"""Once the history is large, the k-d tree is rebuilt every 1/TREE_GROWTH of its rows rather than
-every ``buffer_size``. Per result that costs a scan of up to two such intervals on the event loop
+"""Once the tree is large, it is rebuilt every 1/TREE_GROWTH of its rows rather than every
+``buffer_size``. Per result that costs a scan of up to two such intervals on the event loop
 (~12 ns a row) plus a share of a build on a thread (~0.5 s at 1M rows); at 1M rows, an interval of
 ~3,900 keeps both near 0.1 ms, and leaves a build seconds to finish before it is needed."""
 
@@ -151,8 +158,8 @@ class _Tree:
     """A k-d tree over the first occurrence of each position among some history rows."""
 
     tree: cKDTree
-    rows: np.ndarray
-    """The history row of each point in the tree."""
+    rewards: np.ndarray
+    """The reward of each point in the tree."""
 
 
 def _build_tree(rows: np.ndarray) -> _Tree:
@@ -162,7 +169,7 @@ def _build_tree(rows: np.ndarray) -> _Tree:
     without them). scipy builds the tree without holding the GIL, so a thread can do it while the
     event loop answers requests."""
     firsts = np.flatnonzero(rows[:, -1] == 0.0)
-    return _Tree(cKDTree(rows[firsts, :-3]), firsts)
+    return _Tree(cKDTree(rows[firsts, :-3]), rows[firsts, -3].copy())
 
 
 @dataclass
@@ -175,40 +182,44 @@ class _TreeBuild:
 
 class _History:
     """Every result as a row (task features, reward, ALP, whether an earlier row has the same
-    features), and the exact nearest earlier task.
+    features), and the nearest earlier task among the last ``window`` rows or so.
 
     Older tasks sit in a k-d tree (each position once, at its first row), newer ones are scanned
-    directly. Which tasks the tree holds
-    depends only on the number of rows: at each checkpoint (every ``buffer_size`` rows, or every
-    1/TREE_GROWTH of the rows once that is more) a tree over all rows so far is requested as a
-    ``BuildJob``, and it replaces the current tree at the next checkpoint. The build has a whole
-    interval to run off the event loop, and whoever built it (a thread, or this class itself when
-    the output has not come back in time, as in a replay), the switch happens at the same row.
-    Ties between equidistant tasks go to the tree, and within the scan to the earliest row, so the
-    answers never depend on timing, and a repeated task is always compared with its first row.
+    directly. Which tasks the tree holds depends only on the number of rows: at each checkpoint
+    (every ``buffer_size`` rows, or every 1/TREE_GROWTH of the tree's rows once that is more) a
+    tree over the last ``window`` rows so far is requested as a ``BuildJob``, and it replaces the
+    current tree at the next checkpoint. The build has a whole interval to run off the event loop,
+    and whoever built it (a thread, or this class itself when the output has not come back in time,
+    as in a replay), the switch happens at the same row. Ties between equidistant tasks go to the
+    tree, and within the scan to the earliest row, so the answers never depend on timing, and a
+    repeated task is always compared with its first row while that row is in the window (a
+    position whose first row has left it is left out of the tree until it is drawn again).
+
+    Rows older than the tree's window are dropped once stored (``RowLog``), so memory stays
+    bounded by the window whatever the number of results.
     """
 
-    def __init__(self, dims: int, buffer_size: int) -> None:
+    def __init__(self, dims: int, buffer_size: int, window: int) -> None:
         self.dims = dims
         self._buffer_size = buffer_size
-        self._rows = np.empty((2 * buffer_size, dims + 3))
-        self.size = 0
+        self._window = window
+        self.log = RowLog(dims + 3, 2 * buffer_size)
         self._tree: _Tree | None = None
         self._tree_size = 0
         self._next_checkpoint = buffer_size
         self._build: _TreeBuild | None = None
 
-    def rows(self, start: int) -> np.ndarray:
-        rows: np.ndarray = self._rows[start : self.size].copy()
-        return rows
+    @property
+    def size(self) -> int:
+        return self.log.size
 
     def alps(self, start: int) -> np.ndarray:
-        values: np.ndarray = self._rows[start : self.size, self.dims + 1].copy()
+        values: np.ndarray = self.log.view(start)[:, self.dims + 1].copy()
         return values
 
     def fit_points(self, start: int, stop: int) -> np.ndarray:
         """(task features, ALP) of rows ``start`` to ``stop``: the points a mixture is fitted to."""
-        rows = self._rows[start:stop]
+        rows = self.log.view(start, stop)
         return np.concatenate([rows[:, : self.dims], rows[:, self.dims + 1 : self.dims + 2]], axis=1)
 
     def nearest(self, point: np.ndarray) -> tuple[float, float]:
@@ -217,23 +228,18 @@ class _History:
         if self._tree is not None:
             # One point, so scalars; the stubs also allow the arrays a batch of points would give.
             distance, index = cast("tuple[float, np.intp]", self._tree.tree.query(point))
-            reward = self._rows[self._tree.rows[index], self.dims]
+            reward = self._tree.rewards[index]
         if self.size > self._tree_size:
-            offsets = self._rows[self._tree_size : self.size, : self.dims] - point
+            recent = self.log.view(self._tree_size)
+            offsets = recent[:, : self.dims] - point
             squared = np.einsum("ij,ij->i", offsets, offsets)
             nearest = int(np.argmin(squared))
             if math.sqrt(squared[nearest]) < distance:
-                distance, reward = math.sqrt(squared[nearest]), self._rows[self._tree_size + nearest, self.dims]
+                distance, reward = math.sqrt(squared[nearest]), recent[nearest, self.dims]
         return float(distance), float(reward)
 
     def add(self, features: np.ndarray, reward: float, alp: float, repeat: bool) -> None:
-        if self.size == len(self._rows):
-            grown = np.empty((2 * len(self._rows), self.dims + 3))
-            grown[: self.size] = self._rows[: self.size]
-            self._rows = grown  # a build still running holds the old array, whose rows are the same
-        self._rows[self.size, : self.dims] = features
-        self._rows[self.size, self.dims :] = (reward, alp, float(repeat))
-        self.size += 1
+        self.log.append(np.concatenate([features, (reward, alp, float(repeat))]))
         if self.size == self._next_checkpoint:
             if self._build is not None:
                 self._switch_to(self._build)
@@ -249,35 +255,41 @@ class _History:
         if self._build is not None and self._build.job is job:
             self._build.tree = tree
 
-    def restore(self, rows: np.ndarray) -> None:
-        """Take ``rows`` as the history, with the tree and pending build a live run had there."""
-        if len(rows) and (rows.ndim != 2 or rows.shape[1] != self.dims + 3):
-            raise ValueError(f"history rows must have {self.dims + 3} columns, got shape {rows.shape}")
-        self._rows = np.empty((max(2 * len(rows), 2 * self._buffer_size), self.dims + 3))
-        self._rows[: len(rows)] = rows
-        self.size = len(rows)
+    def restore(self, rows: np.ndarray, first: int, size: int) -> None:
+        """Take ``rows`` as history rows ``first`` to ``size``, with the tree and pending build a
+        live run had there (``first`` is at most the tree's window start, as ``kept_from`` said)."""
+        self.log.load(rows, first, size)
         passed = [0, 0]  # the last two checkpoints at or before the last row
         while self._next_checkpoint <= self.size:
             passed = [passed[1], self._next_checkpoint]
             self._next_checkpoint = self._advance(self._next_checkpoint)
         if passed[0]:
-            self._tree, self._tree_size = _build_tree(self._rows[: passed[0]]), passed[0]
+            self._switch_to(_TreeBuild(passed[0], self._tree_job(passed[0], passed[1])))
         if passed[1]:
             self._build = _TreeBuild(passed[1], self._tree_job(passed[1], self._next_checkpoint))
 
+    @property
+    def kept_from(self) -> int:
+        """The oldest row a restore needs: the start of the current tree's window."""
+        return self.log.needed_from
+
+    def _window_start(self, size: int) -> int:
+        return max(0, size - self._window)
+
     def _advance(self, checkpoint: int) -> int:
-        return checkpoint + max(self._buffer_size, checkpoint // TREE_GROWTH)
+        return checkpoint + max(self._buffer_size, min(checkpoint, self._window) // TREE_GROWTH)
 
     def _request_build(self) -> None:
         self._next_checkpoint = self._advance(self.size)
         self._build = _TreeBuild(self.size, self._tree_job(self.size, self._next_checkpoint))
 
     def _tree_job(self, size: int, needed_at: int) -> BuildJob:
-        return BuildJob(needed_at, functools.partial(_build_tree, self._rows[:size]))
+        return BuildJob(needed_at, functools.partial(_build_tree, self.log.view(self._window_start(size), size)))
 
     def _switch_to(self, build: _TreeBuild) -> None:
         self._tree = build.tree if build.tree is not None else build.job.run()
         self._tree_size = build.size
+        self.log.needed_from = self._window_start(build.size)
 
 
 @dataclass(frozen=True)
@@ -338,7 +350,7 @@ class AlpGmmTeacher(Teacher):
                 self._target = space.to_array(space.hardest())
             except ValueError as error:
                 raise ValueError(f"target_task_ratio needs a hardest value for every parameter: {error}") from None
-        self._history = _History(len(space), self.params.buffer_size)
+        self._history = _History(len(space), self.params.buffer_size, self.params.history_window)
         self._sampler: MixtureSampler | None = None
         self.fits_requested = 0
         self.fits_installed = 0
@@ -436,11 +448,19 @@ class AlpGmmTeacher(Teacher):
     def history(self, start: int) -> np.ndarray:
         """One row per result: its task features, its (scaled) reward, its ALP, and 1.0 when an
         earlier result had the same task features (else 0.0)."""
-        return self._history.rows(start)
+        return self._history.log.copy(start)
+
+    @property
+    def history_held(self) -> int:
+        return self._history.log.held
+
+    def release_history(self, before: int) -> None:
+        self._history.log.release(before)
 
     def _export(self) -> dict[str, Any]:
         return {
             "history_rows": self._history.size,
+            "history_from": self._history.kept_from,
             "fits_requested": self.fits_requested,
             "fits_installed": self.fits_installed,
             "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
@@ -449,9 +469,7 @@ class AlpGmmTeacher(Teacher):
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        if len(history) != state["history_rows"]:
-            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
-        self._history.restore(history)
+        self._history.restore(history, int(state.get("history_from", 0)), int(state["history_rows"]))
         self.fits_requested = int(state["fits_requested"])
         self.fits_installed = int(state["fits_installed"])
         self._sampler = None if state["model"] is None else self._prepare(self.import_fit(state["model"]))

@@ -165,9 +165,25 @@ class Teacher(ABC):
         written, so a store can append them in chunks."""
         return np.empty((0, 0))
 
+    @property
+    def history_held(self) -> int:
+        """History rows still in memory (the rest were released and are no longer read)."""
+        return self.history_size
+
+    def release_history(self, before: int) -> None:  # noqa: B027 (a hook: most kinds keep no history)
+        """History rows before ``before`` are stored and will not be asked for again: a teacher
+        drops those its algorithm no longer reads, so its memory stays bounded."""
+
+    @staticmethod
+    def history_kept_from(snapshot: Mapping[str, Any]) -> int:
+        """The first history row that ``restore`` needs with ``snapshot`` (rows before it were
+        dropped from memory by then, and are not needed again)."""
+        return int(snapshot["state"].get("history_from", 0))
+
     def restore(self, snapshot: Mapping[str, Any], history: np.ndarray) -> None:
-        """Become the teacher that ``snapshot()`` described, with ``history`` its rows up to then.
-        Only on a fresh teacher built with the same kind, space, seed and params."""
+        """Become the teacher that ``snapshot()`` described, with ``history`` its rows from
+        ``history_kept_from(snapshot)`` up to then. Only on a fresh teacher built with the same
+        kind, space, seed and params."""
         if snapshot["kind"] != self.kind:
             raise ValueError(f"a {snapshot['kind']} snapshot cannot restore a {self.kind} teacher")
         if self.tasks_sampled or self.results_seen:

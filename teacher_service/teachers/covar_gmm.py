@@ -41,6 +41,12 @@ from teacher_service.teachers.alp_gmm import (
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.row_log import RowLog
+
+REFIT_ROWS = 10_000
+REFIT_BATCHES = 8
+"""A fit only reads its own batch, but a restart may rerun a fit that was due before the crash:
+the last REFIT_BATCHES batches, or REFIT_ROWS results if more, stay in memory for that."""
 
 
 class CovarGmmParams(TeacherParams):
@@ -84,8 +90,7 @@ class CovarGmmTeacher(Teacher):
     def __init__(self, space: TaskSpace, seed: int, params: CovarGmmParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         self._width = len(space) + 2
-        self._rows = np.empty((2 * self.params.fit_rate, self._width))
-        self._size = 0
+        self._log = RowLog(self._width, 2 * self.params.fit_rate)
         self._sampler: MixtureSampler | None = None
         self.fits_requested = 0
         self.fits_installed = 0
@@ -103,16 +108,11 @@ class CovarGmmTeacher(Teacher):
 
     def _learn(self, result: EpisodeResult) -> FitJob | None:
         rate = self.params.fit_rate
-        if self._size == len(self._rows):
-            grown = np.empty((2 * len(self._rows), self._width))
-            grown[: self._size] = self._rows[: self._size]
-            self._rows = grown
-        time = (self._size % rate) / rate
-        self._rows[self._size, :-2] = self._to_features(self.space.to_array(result.task))
-        self._rows[self._size, -2:] = (time, result.reward)
-        self._size += 1
-        if self._size % rate:
+        time = (self._log.size % rate) / rate
+        self._log.append(np.concatenate([self._to_features(self.space.to_array(result.task)), (time, result.reward)]))
+        if self._log.size % rate:
             return None
+        self._log.needed_from = max(0, self._log.size - max(REFIT_ROWS, REFIT_BATCHES * rate))
         self.fits_requested += 1
         return self.refit_job(self.fits_requested - 1)
 
@@ -124,7 +124,7 @@ class CovarGmmTeacher(Teacher):
         run = functools.partial(
             fit_mixture,
             index,
-            self._rows[index * rate : (index + 1) * rate].copy(),
+            self._log.view(index * rate, (index + 1) * rate).copy(),
             range(self.params.min_components, self.params.max_components + 1),
             self.params.nb_em_init,
             indexed_seed(self.seed, FIT_STREAM, index),
@@ -160,29 +160,31 @@ class CovarGmmTeacher(Teacher):
 
     @property
     def history_size(self) -> int:
-        return self._size
+        return self._log.size
 
     def history(self, start: int) -> np.ndarray:
         """One row per result: its task features, its time in its batch and its reward."""
-        rows: np.ndarray = self._rows[start : self._size].copy()
-        return rows
+        return self._log.copy(start)
+
+    @property
+    def history_held(self) -> int:
+        return self._log.held
+
+    def release_history(self, before: int) -> None:
+        self._log.release(before)
 
     def _export(self) -> dict[str, Any]:
         return {
-            "history_rows": self._size,
+            "history_rows": self._log.size,
+            "history_from": self._log.needed_from,
             "fits_requested": self.fits_requested,
             "fits_installed": self.fits_installed,
             "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        if len(history) != state["history_rows"]:
-            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
-        if len(history) and (history.ndim != 2 or history.shape[1] != self._width):
-            raise ValueError(f"history rows must have {self._width} columns, got shape {history.shape}")
-        self._rows = np.empty((max(2 * len(history), 2 * self.params.fit_rate), self._width))
-        self._rows[: len(history)] = history
-        self._size = len(history)
+        first = int(state.get("history_from", 0))
+        self._log.load(history, first, int(state["history_rows"]))
         self.fits_requested = int(state["fits_requested"])
         self.fits_installed = int(state["fits_installed"])
         model = state["model"]

@@ -57,6 +57,7 @@ from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
+from teacher_service.teachers.row_log import RowLog
 
 MAX_PARTICLES = 500
 MAX_BUFFER = 2000
@@ -261,8 +262,7 @@ class CurrotTeacher(Teacher):
             start = np.clip(easiest + self.params.start_spread * ndtri(start + 2.0**-54), 0.0, 1.0)
         self._particles = start
         self._fit: ParticleFit | None = None
-        self._rows = np.empty((2 * self.params.buffer_size, dims + 2))
-        self._size = 0
+        self._log = RowLog(dims + 2, 2 * self.params.buffer_size)
         self.fits_requested = 0
         self.fits_installed = 0
         self._starting_points: dict[int, np.ndarray] = {}
@@ -288,12 +288,9 @@ class CurrotTeacher(Teacher):
         return [self.space.from_array(row) for row in self.space.from_unit(units)]
 
     def _learn(self, result: EpisodeResult) -> FitJob | None:
-        if self._size == len(self._rows):
-            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
         success = UNKNOWN_SUCCESS if result.success is None else float(result.success)
-        self._rows[self._size, :-2] = self.space.to_unit(self.space.to_array(result.task))
-        self._rows[self._size, -2:] = (result.reward, success)
-        self._size += 1
+        unit = self.space.to_unit(self.space.to_array(result.task))
+        self._log.append(np.concatenate([unit, (result.reward, success)]))
         if self.results_seen % self.params.update_every:
             return None
         self.fits_requested += 1
@@ -301,7 +298,12 @@ class CurrotTeacher(Teacher):
         self._starting_points[index] = self._particles
         for stale in sorted(self._starting_points)[:-MAX_PENDING_FITS]:
             del self._starting_points[stale]
+        self._log.needed_from = self._window_start(min(self._starting_points))
         return self.refit_job(index)
+
+    def _window_start(self, index: int) -> int:
+        """The first of the results that update ``index`` sees."""
+        return max(0, (index + 1) * self.params.update_every - self.params.buffer_size)
 
     def refit_job(self, index: int) -> FitJob:
         """Update ``index`` starts from the particles installed when it fell due (kept until a
@@ -310,8 +312,7 @@ class CurrotTeacher(Teacher):
             raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
         if index not in self._starting_points:
             raise ValueError(f"fit {index} was superseded: a later fit is installed or due")
-        end = (index + 1) * self.params.update_every
-        window = self._rows[max(0, end - self.params.buffer_size) : end]
+        window = self._log.view(self._window_start(index), (index + 1) * self.params.update_every)
         if np.all(window[:, -1] != UNKNOWN_SUCCESS):
             measure, performance, bar = "success", window[:, -1].copy(), self.params.success_delta
         else:
@@ -383,17 +384,24 @@ class CurrotTeacher(Teacher):
 
     @property
     def history_size(self) -> int:
-        return self._size
+        return self._log.size
 
     def history(self, start: int) -> np.ndarray:
         """One row per result: its task in unit coordinates, its reward and its success (1, 0, or
         -1 when not reported)."""
-        rows: np.ndarray = self._rows[start : self._size].copy()
-        return rows
+        return self._log.copy(start)
+
+    @property
+    def history_held(self) -> int:
+        return self._log.held
+
+    def release_history(self, before: int) -> None:
+        self._log.release(before)
 
     def _export(self) -> dict[str, Any]:
         return {
-            "history_rows": self._size,
+            "history_rows": self._log.size,
+            "history_from": self._log.needed_from,
             "fits_requested": self.fits_requested,
             "fits_installed": self.fits_installed,
             "model": None if self._fit is None else self.export_fit(self._fit),
@@ -402,14 +410,8 @@ class CurrotTeacher(Teacher):
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        width = len(self.space) + 2
-        if len(history) != state["history_rows"]:
-            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
-        if len(history) and (history.ndim != 2 or history.shape[1] != width):
-            raise ValueError(f"history rows must have {width} columns, got shape {history.shape}")
-        self._rows = np.empty((max(2 * len(history), 2 * self.params.buffer_size), width))
-        self._rows[: len(history)] = history
-        self._size = len(history)
+        first = int(state.get("history_from", 0))
+        self._log.load(history, first, int(state["history_rows"]))
         if state["model"] is not None:
             self._adopt(self.import_fit(state["model"]))
         self.fits_requested = int(state["fits_requested"])

@@ -54,8 +54,9 @@ class Mirror:
     """One curriculum on the service, and a reference teacher given the same draws and results.
     Every step is logged, so ``replay`` can build the reference again with some fits left out."""
 
-    def __init__(self, api: httpx.Client, name: str, kind: str) -> None:
+    def __init__(self, api: httpx.Client, name: str, kind: str, params: dict[str, Any] | None = None) -> None:
         self.api, self.name, self.kind = api, name, kind
+        self.params = KIND_PARAMS[kind] if params is None else params
         self.reference = self.fresh_reference()
         self.due: list[FitJob] = []
         self.reported = 0
@@ -63,10 +64,10 @@ class Mirror:
         self.steps: list[tuple[str, Any]] = []
 
     def fresh_reference(self) -> Teacher:
-        return make_teacher(self.kind, KUKA_TASK_SPACE, SEED, KIND_PARAMS[self.kind])
+        return make_teacher(self.kind, KUKA_TASK_SPACE, SEED, self.params)
 
     def create(self) -> None:
-        body = {"teacher": self.kind, "space": SPACE, "params": KIND_PARAMS[self.kind], "seed": SEED}
+        body = {"teacher": self.kind, "space": SPACE, "params": self.params, "seed": SEED}
         assert self.api.put(f"/curricula/{self.name}", json=body).status_code == 201
 
     def draw(self, count: int) -> list[dict[str, Any]]:
@@ -202,6 +203,38 @@ def test_a_killed_service_restarts_from_its_snapshot_as_the_same_teacher(
             mirror.learn(task["params"], 1.0)
         mirror.draw(10)
         mirror.finish_fits()  # alp-gmm: result 64 brought fit 3, run live as usual
+        assert mirror.state()["teacher"] == _as_json(mirror.reference.state())
+    finally:
+        service.stop()
+
+
+def test_a_restart_reads_only_the_history_rows_the_teacher_still_needs(
+    tmp_path: Path, api_for: Callable[[ServiceProcess], httpx.Client]
+) -> None:
+    """ALP-GMM searches the last ``history_window`` results for nearest tasks; once the store has
+    written older rows the teacher drops them, and a restart reads only the rows it kept: the test
+    deletes the stored chunks before them."""
+    params = {"fit_rate": 1000, "max_components": 3, "history_window": 10_000, "buffer_size": 500}
+    service = ServiceProcess(tmp_path / "teacher.db", env={"KC_SNAPSHOT_EVERY": "500"}).start()
+    try:
+        mirror = Mirror(api_for(service), "windowed", "alp-gmm", params)
+        mirror.create()
+        for _ in range(14):
+            mirror.report(mirror.draw(1000))
+        mirror.report(mirror.draw(600))
+        service.kill()
+        with sqlite3.connect(service.db) as connection:
+            (teacher,) = connection.execute("SELECT teacher FROM snapshots").fetchone()
+            kept_from = Teacher.history_kept_from(json.loads(teacher))
+            assert kept_from > 0
+            dropped = connection.execute(
+                "DELETE FROM history_chunks WHERE first_row + row_count <= ?", (kept_from,)
+            ).rowcount
+        assert dropped > 0, "chunks before the kept rows were stored"
+        service.start()
+        assert mirror.state()["teacher"] == _as_json(mirror.reference.state())
+        for _ in range(2):
+            mirror.report(mirror.draw(700))
         assert mirror.state()["teacher"] == _as_json(mirror.reference.state())
     finally:
         service.stop()

@@ -105,11 +105,12 @@ def test_replaying_the_history_rebuilds_the_teacher(kind: str) -> None:
 
 def restored_copy(teacher: Teacher) -> Teacher:
     """A fresh teacher restored from ``teacher``'s snapshot, the snapshot passed through JSON text and
-    the history split in two chunks, as a store keeps them."""
+    the history rows it needs split in two chunks, as a store keeps them."""
     snapshot = json.loads(json.dumps(teacher.snapshot(), allow_nan=False))
-    half = teacher.history_size // 2
-    history = teacher.history(0)
-    chunks = np.concatenate([history[:half], teacher.history(half)]) if teacher.history_size else history
+    kept_from = Teacher.history_kept_from(snapshot)
+    half = (kept_from + teacher.history_size) // 2
+    history = teacher.history(kept_from)
+    chunks = np.concatenate([history[: half - kept_from], teacher.history(half)]) if teacher.history_size else history
     restored = build(teacher.kind)
     restored.restore(snapshot, chunks)
     return restored
