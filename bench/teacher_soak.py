@@ -30,8 +30,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common.schemas import ParameterSpec  # noqa: E402
 from common.task_space import KUKA_TASK_SPACE  # noqa: E402
 from teacher_service.process import ServiceProcess  # noqa: E402
+from teacher_service.teachers import TEACHER_KINDS  # noqa: E402
 
-KINDS = ("alp-gmm", "manual", "random", "fixed")
+KINDS = tuple(TEACHER_KINDS)
+SOAK_PARAMS: dict[str, dict[str, object]] = {"alp-gmm": {"fit_rate": 250, "history_window": 10_000}}
+"""ALP-GMM with its smallest nearest-task window, so that its curricula reach it (and their memory
+its bound) within minutes; every other kind with its defaults."""
 ABANDON_SHARE = 0.05
 """Share of drawn tasks whose episode is 'lost' and never reported."""
 MOVE_EVERY_S = 30.0
@@ -85,8 +89,7 @@ async def _call(
 
 
 async def _register(client: httpx.AsyncClient, tally: Tally, name: str, kind: str, seed: int) -> None:
-    params = {"fit_rate": 250} if kind == "alp-gmm" else {}
-    body = {"teacher": kind, "space": SPACE, "params": params, "seed": seed}
+    body = {"teacher": kind, "space": SPACE, "params": SOAK_PARAMS.get(kind, {}), "seed": seed}
     while (response := await _call(client, tally, "put", "PUT", f"/api/v1/curricula/{name}", body)) is None:
         await asyncio.sleep(0.2)
     response.raise_for_status()
