@@ -1,4 +1,4 @@
-"""Every teacher kind on the ALP-GMM paper's toy, over HTTP against a real ``serve``.
+"""Every teacher kind on the ALP-GMM paper's toy, over HTTP against a real ``serve``; resumable.
 
 The toy is teachDeepRL's ``toy_env.py`` (Portelas et al. 2019):
 
@@ -12,29 +12,43 @@ The toy is teachDeepRL's ``toy_env.py`` (Portelas et al. 2019):
 
 Each (space, teacher, seed) is one curriculum on one ``kuka-curriculum serve`` process: the space
 names x0..x{D-1} over [0, 1] (easiest 0, hardest 1), the seed is the run's seed, the parameters are
-the kind's defaults. A run draws ``--batch`` tasks (1, as in the reference loop), plays them,
-reports the rewards, then waits until no fit is pending, so a fit is in place before the next draw
-as in the reference's synchronous loop. Kinds come from ``teacher_service.teachers.TEACHER_KINDS``,
-so kinds added later run too; one the service refuses for this space (a 422) is skipped and named.
+the kind's defaults overridden by ``--teacher-param KIND.NAME=VALUE`` (repeatable; VALUE is read as
+JSON, else taken as a string; checked against the kind's parameter model before anything runs). A
+run draws ``--batch`` tasks (1, as in the reference loop), plays them, reports the rewards, then
+waits until no fit is pending, so a fit is in place before the next draw as in the reference's
+synchronous loop. Kinds come from ``teacher_service.teachers.TEACHER_KINDS``, so kinds added later
+run too; one the service refuses for this space (a 422) is recorded as refused, with the reason.
 
 ``--reference DIR`` also runs teachDeepRL's ALP-GMM, Covar-GMM and RIAC (the copies in DIR) in
-process on the same toy and seeds, with ``np.random.seed(seed)`` and the constructor's seed. They
-import from a throw-away package tree in a temp dir, with a ``gym.spaces.Box`` shim over gymnasium's
-whose ``sample`` draws from numpy's global generator like old gym's seeded one did, so a run is
-repeatable. RIAC needs ``treelib`` (in the ``dev`` extra).
+process on the same toy and seeds, with ``np.random.seed(seed)``, the constructor's seed and the
+reference's default parameters. They import from a throw-away package tree in a temp dir, with a
+``gym.spaces.Box`` shim over gymnasium's whose ``sample`` draws from numpy's global generator like
+old gym's seeded one did, so a run is repeatable. RIAC needs ``treelib`` (in the ``dev`` extra).
+
+A full run takes hours, so the driver resumes: each finished run (ours or the reference's, refused
+ones too) is appended at once to ``--out`` as one JSON line and fsync'd, so a kill loses at most the
+run in progress. On start the driver reads that file and skips every run already in it; a run is
+the same run when its space, teacher, implementation, seed, parameters, batch and episodes all
+match, so changing a parameter runs anew beside the old lines. The summary table (and ``--json``)
+covers every line in the file, not only this invocation's. One file holds one ``--episodes``; an
+unfinished last line (a kill mid-write) is dropped.
 
 Usage: PYTHONPATH=. .venv/bin/python bench/teacher_toy.py [--episodes 20000] [--seeds 5]
-       [--teachers covar-gmm,riac,random] [--spaces 2,6] [--reference ../shared/reference-teachers]
-       [--json toy.json]
+       [--teachers covar-gmm,riac,random] [--spaces 2,6] [--batch 1]
+       [--teacher-param self-paced.target=uniform] [--reference ../shared/reference-teachers]
+       [--out teacher_toy.jsonl] [--json toy.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import fcntl
 import importlib
 import itertools
 import json
+import os
 import shutil
+import signal
 import statistics
 import sys
 import tempfile
@@ -42,8 +56,10 @@ import time
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import httpx
@@ -117,15 +133,108 @@ class Toy:
 
 
 @dataclass(frozen=True)
-class Run:
+class RunId:
+    """What makes two runs the same run: the driver skips every id already in its results file."""
+
     dims: int
     teacher: str
     implementation: str
     """"ours" (over HTTP) or "reference" (teachDeepRL in process)."""
     seed: int
-    mastered: dict[int, float]
-    """Percent of cubes mastered after each checkpoint's number of episodes."""
+    params: str
+    """The kind's parameters given on the command line (not its defaults), as canonical JSON."""
+    batch: int
+    """Tasks drawn per request; the reference draws one per update."""
+    episodes: int
+
+
+@dataclass(frozen=True)
+class Run:
+    """One finished run: one line of the results file."""
+
+    id: RunId
+    mastered: dict[int, float] | None
+    """Percent of cubes mastered after each checkpoint's number of episodes; None when refused."""
+    refused: str | None
+    """The service's reason for refusing this kind on this space."""
     seconds: float
+    finished: str
+    """UTC time the run ended, ISO 8601."""
+
+    def record(self) -> dict[str, Any]:
+        """The JSON line: the id's fields flat, parameters as an object, checkpoints as string keys."""
+        mastered = None if self.mastered is None else {str(c): m for c, m in self.mastered.items()}
+        return {
+            "dims": self.id.dims,
+            "teacher": self.id.teacher,
+            "implementation": self.id.implementation,
+            "seed": self.id.seed,
+            "params": json.loads(self.id.params),
+            "batch": self.id.batch,
+            "episodes": self.id.episodes,
+            "mastered": mastered,
+            "refused": self.refused,
+            "seconds": round(self.seconds, 1),
+            "finished": self.finished,
+        }
+
+    @classmethod
+    def from_record(cls, record: dict[str, Any]) -> Run:
+        mastered = record["mastered"]
+        return cls(
+            RunId(
+                int(record["dims"]),
+                str(record["teacher"]),
+                str(record["implementation"]),
+                int(record["seed"]),
+                canonical(record["params"]),
+                int(record["batch"]),
+                int(record["episodes"]),
+            ),
+            None if mastered is None else {int(c): float(m) for c, m in mastered.items()},
+            record["refused"],
+            float(record["seconds"]),
+            str(record["finished"]),
+        )
+
+
+def canonical(params: dict[str, Any]) -> str:
+    return json.dumps(params, sort_keys=True, separators=(",", ":"))
+
+
+def now_utc() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def load_runs(path: Path) -> list[Run]:
+    """The runs in the results file, first of each id kept; an unfinished last line is cut off."""
+    if not path.exists():
+        return []
+    data = path.read_bytes()
+    complete = data.rfind(b"\n") + 1
+    if complete < len(data):
+        print(f"{path}: dropping an unfinished last line ({len(data) - complete} bytes)", file=sys.stderr)
+        with path.open("r+b") as results:
+            results.truncate(complete)
+            os.fsync(results.fileno())
+    runs: dict[RunId, Run] = {}
+    for number, line in enumerate(data[:complete].decode().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            run = Run.from_record(json.loads(line))
+        except (ValueError, KeyError, TypeError, AttributeError) as error:
+            raise SystemExit(f"{path}:{number}: not a run record ({error!r}); fix or move the file") from None
+        runs.setdefault(run.id, run)
+    return list(runs.values())
+
+
+def append_run(path: Path, run: Run) -> None:
+    """One line, flushed to disk before the next run starts."""
+    with path.open("a") as results:
+        results.write(json.dumps(run.record()) + "\n")
+        results.flush()
+        os.fsync(results.fileno())
 
 
 def toy_space(dims: int) -> list[dict[str, Any]]:
@@ -152,9 +261,9 @@ class ServiceRunner:
         self.batch = batch
         self.bar = bar
 
-    def register(self, name: str, kind: str, dims: int, seed: int) -> str | None:
+    def register(self, name: str, kind: str, dims: int, seed: int, params: dict[str, Any]) -> str | None:
         """Create the curriculum; the service's reason when it refuses this kind on this space."""
-        body = {"teacher": kind, "space": toy_space(dims), "seed": seed, "params": {}}
+        body = {"teacher": kind, "space": toy_space(dims), "seed": seed, "params": params}
         response = self.http.put(f"/{name}", json=body)
         if response.status_code == 422:
             return json.dumps(response.json()["detail"])[:300]
@@ -229,34 +338,142 @@ def run_reference(
 
 def describe(run: Run) -> str:
     """One finished run, as a progress line."""
+    what = f"{run.id.dims}-D {label(run.id)} seed {run.id.seed}"
+    if run.mastered is None:
+        return f"{what}: refused: {run.refused}"
     scores = ", ".join(f"{episodes:,}: {score:.0f}%" for episodes, score in run.mastered.items())
-    return f"{run.dims}-D {run.teacher} ({run.implementation}) seed {run.seed}: {scores} in {run.seconds:.0f} s"
+    return f"{what}: {scores} in {run.seconds:.0f} s"
 
 
-def summarise(runs: list[Run], checkpoints: list[int], skipped: dict[str, str]) -> str:
+def label(run_id: RunId) -> str:
+    """The teacher, which implementation, and whatever was set beyond its defaults."""
+    text = run_id.teacher if run_id.implementation == "ours" else f"{run_id.teacher} (reference)"
+    params = json.loads(run_id.params)
+    if params:
+        text += " " + ",".join(f"{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in params.items())
+    if run_id.batch != 1:
+        text += f" batch {run_id.batch}"
+    return text
+
+
+def summarise(runs: list[Run], checkpoints: list[int]) -> str:
+    """Mean score per (space, teacher, parameters) over the seeds it has, and ours against the reference."""
+    groups: dict[tuple[int, str, str, str, int], list[tuple[int, dict[int, float]]]] = {}
+    labels: dict[tuple[int, str, str, str, int], str] = {}
+    refused: dict[str, str] = {}
+    for run in runs:
+        key = (run.id.dims, run.id.teacher, run.id.implementation, run.id.params, run.id.batch)
+        labels[key] = label(run.id)
+        if run.mastered is None:
+            refused[f"{label(run.id)} on {run.id.dims}-D"] = str(run.refused)
+        else:
+            groups.setdefault(key, []).append((run.id.seed, run.mastered))
+    width = max([len(text) for text in labels.values()] + [len("teacher")])
+    last = checkpoints[-1]
     lines = [
         f"% of the 100 cubes mastered (competence > {MASTERED_ABOVE}) after "
         + ", ".join(f"{c:,}" for c in checkpoints)
         + " episodes: mean over seeds, then the last checkpoint per seed",
-        f"{'space':<6} {'teacher':<24} " + " ".join(f"{c:>7,}" for c in checkpoints) + "  per seed (last)",
+        f"{'space':<6} {'teacher':<{width}} " + " ".join(f"{c:>7,}" for c in checkpoints) + "  seed:score (last)",
     ]
-    groups: dict[tuple[int, str, str], list[Run]] = {}
-    for run in runs:
-        groups.setdefault((run.dims, run.teacher, run.implementation), []).append(run)
-    finals: dict[tuple[int, str, str], float] = {}
-    for (dims, teacher, implementation), members in sorted(groups.items()):
-        label = teacher if implementation == "ours" else f"{teacher} (reference)"
-        means = [statistics.fmean(run.mastered[c] for run in members) for c in checkpoints]
-        finals[(dims, teacher, implementation)] = means[-1]
-        per_seed = " ".join(f"{run.mastered[checkpoints[-1]]:.0f}" for run in sorted(members, key=lambda r: r.seed))
-        lines.append(f"{dims}-D    {label:<24} " + " ".join(f"{m:7.1f}" for m in means) + f"  [{per_seed}]")
-    for (dims, teacher, implementation), final in sorted(finals.items()):
-        reference = finals.get((dims, teacher, "reference"))
+    finals: dict[tuple[int, str, str, str, int], float] = {}
+    for key, members in sorted(groups.items()):
+        means = [statistics.fmean(mastered[c] for _, mastered in members) for c in checkpoints]
+        finals[key] = means[-1]
+        per_seed = " ".join(f"{seed}:{mastered[last]:.0f}" for seed, mastered in sorted(members))
+        lines.append(f"{key[0]}-D    {labels[key]:<{width}} " + " ".join(f"{m:7.1f}" for m in means) + f"  {per_seed}")
+    for key, final in sorted(finals.items()):
+        dims, teacher, implementation, _, _ = key
+        reference = finals.get((dims, teacher, "reference", canonical({}), 1))
         if implementation == "ours" and reference is not None:
             ratio = f"{final / reference:.2f}x" if reference > 0 else "n/a (reference 0)"
-            lines.append(f"{dims}-D    {teacher}: ours / reference at {checkpoints[-1]:,} episodes = {ratio}")
-    lines += [f"skipped {what}: {why}" for what, why in skipped.items()]
+            lines.append(f"{dims}-D    {labels[key]}: ours / reference at {last:,} episodes = {ratio}")
+    lines += [f"refused {what}: {why}" for what, why in sorted(refused.items())]
     return "\n".join(lines)
+
+
+def teacher_params(given: list[str], parser: argparse.ArgumentParser) -> dict[str, dict[str, Any]]:
+    """``KIND.NAME=VALUE`` items as parameters per kind, each kind's set checked by its model."""
+    params: dict[str, dict[str, Any]] = {}
+    for item in given:
+        target, equals, raw = item.partition("=")
+        kind, dot, name = target.partition(".")
+        if not (equals and dot and kind and name):
+            parser.error(f"--teacher-param {item!r}: expected KIND.NAME=VALUE")
+        if kind not in TEACHER_KINDS:
+            parser.error(f"--teacher-param {item!r}: unknown kind; registered: {sorted(TEACHER_KINDS)}")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        params.setdefault(kind, {})[name] = value
+    for kind, values in params.items():
+        try:
+            TEACHER_KINDS[kind].Params.parse(values)
+        except ValueError as error:
+            parser.error(f"--teacher-param for {kind}: {error}")
+    return params
+
+
+@contextmanager
+def sole_writer(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the results file, so two drivers never run the same runs into it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as results:
+        try:
+            fcntl.flock(results.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise SystemExit(f"another driver is writing {path}") from None
+        yield
+
+
+def stop_on_sigterm(signum: int, frame: FrameType | None) -> None:
+    """Unwind on SIGTERM as on Ctrl-C, so the service process stops with the driver."""
+    raise KeyboardInterrupt
+
+
+def execute(
+    todo: list[RunId],
+    batch: int,
+    reference: Path | None,
+    checkpoints: list[int],
+    bar: tqdm[Any],
+    finish: Callable[[Run], None],
+) -> None:
+    """Play each run in ``todo`` (ours on one service, then the reference's) and ``finish`` it."""
+    # One BLAS thread for the reference's in-process fits, as our fit process has: on a shared
+    # machine more threads only contend.
+    threadpool_limits(limits=1)
+    # Duplicate-heavy early fits make scikit-learn warn; the warnings say nothing about the result.
+    warnings.filterwarnings("ignore", category=ConvergenceWarning)
+    # The reference builds float32 boxes from float64 bounds; gymnasium warns about each one.
+    warnings.filterwarnings("ignore", message=".*precision lowered by casting to float32")
+    episodes = checkpoints[-1]
+    ours = [run_id for run_id in todo if run_id.implementation == "ours"]
+    if ours:
+        with (
+            tempfile.TemporaryDirectory(prefix="teacher-toy-") as temp,
+            ServiceProcess(Path(temp) / "toy.db") as service,
+        ):
+            runner = ServiceRunner(service.url, batch, bar)
+            for run_id in ours:
+                start = time.perf_counter()
+                name = f"toy-{run_id.dims}d-{run_id.teacher}-{run_id.seed}"
+                params = json.loads(run_id.params)
+                reason = runner.register(name, run_id.teacher, run_id.dims, run_id.seed, params)
+                if reason is not None:
+                    bar.update(episodes)
+                    finish(Run(run_id, None, reason, time.perf_counter() - start, now_utc()))
+                    continue
+                mastered = runner.run(name, run_id.dims, episodes, checkpoints)
+                finish(Run(run_id, mastered, None, time.perf_counter() - start, now_utc()))
+    theirs = [run_id for run_id in todo if run_id.implementation == "reference"]
+    if theirs and reference is not None:
+        with reference_modules(reference) as classes:
+            for run_id in theirs:
+                start = time.perf_counter()
+                mastered = run_reference(classes[run_id.teacher], run_id.dims, run_id.seed, episodes, checkpoints, bar)
+                finish(Run(run_id, mastered, None, time.perf_counter() - start, now_utc()))
 
 
 def main() -> None:
@@ -266,17 +483,21 @@ def main() -> None:
     parser.add_argument("--teachers", default="", help="comma-separated kinds (default: every registered kind)")
     parser.add_argument("--spaces", default="2,6", help="comma-separated task-space dimensions (2 and/or 6)")
     parser.add_argument("--batch", type=int, default=1, help="tasks drawn per request")
+    parser.add_argument(
+        "--teacher-param",
+        action="append",
+        default=[],
+        metavar="KIND.NAME=VALUE",
+        help="a parameter of one kind, VALUE as JSON or else a string (repeatable)",
+    )
     parser.add_argument("--reference", type=Path, help="teachDeepRL teachers to run beside ours")
-    parser.add_argument("--json", type=Path, default=Path("teacher_toy.json"), help="where to write every run")
+    parser.add_argument(
+        "--out", type=Path, default=Path("teacher_toy.jsonl"), help="results file: one JSON line per run, resumed"
+    )
+    parser.add_argument("--json", type=Path, help="also write every run in the results file as one JSON document")
     args = parser.parse_args()
-    # One BLAS thread for the reference's in-process fits, as our fit process has: on a shared
-    # machine more threads only contend.
-    threadpool_limits(limits=1)
-    # Duplicate-heavy early fits make scikit-learn warn; the warnings say nothing about the result.
-    warnings.filterwarnings("ignore", category=ConvergenceWarning)
-    # The reference builds float32 boxes from float64 bounds; gymnasium warns about each one.
-    warnings.filterwarnings("ignore", message=".*precision lowered by casting to float32")
-
+    if min(args.episodes, args.seeds, args.batch) < 1:
+        parser.error("--episodes, --seeds and --batch must be at least 1")
     kinds = [k for k in args.teachers.split(",") if k] or sorted(TEACHER_KINDS)
     unknown = sorted(set(kinds) - set(TEACHER_KINDS))
     if unknown:
@@ -284,53 +505,59 @@ def main() -> None:
     spaces = [int(d) for d in args.spaces.split(",")]
     if any(d < RELEVANT_DIMS for d in spaces):
         parser.error(f"every space needs at least {RELEVANT_DIMS} dimensions")
+    params = teacher_params(args.teacher_param, parser)
     checkpoints = sorted({c for c in CHECKPOINTS if c < args.episodes} | {args.episodes})
     seeds = range(1, args.seeds + 1)
     references = [k for k in kinds if k in REFERENCE_CLASSES] if args.reference else []
-    total = args.episodes * len(seeds) * len(spaces) * (len(kinds) + len(references))
 
-    runs: list[Run] = []
-    skipped: dict[str, str] = {}
-    with (
-        tempfile.TemporaryDirectory(prefix="teacher-toy-") as temp,
-        ServiceProcess(Path(temp) / "toy.db") as service,
-        tqdm(total=total, desc="toy episodes", unit="ep", smoothing=0.05) as bar,
-    ):
-        runner = ServiceRunner(service.url, args.batch, bar)
-        for dims, kind, seed in itertools.product(spaces, kinds, seeds):
-            name = f"toy-{dims}d-{kind}-{seed}"
-            reason = runner.register(name, kind, dims, seed)
-            if reason is not None:
-                skipped[f"{kind} on {dims}-D"] = reason
-                bar.update(args.episodes)
-                continue
-            start = time.perf_counter()
-            mastered = runner.run(name, dims, args.episodes, checkpoints)
-            runs.append(Run(dims, kind, "ours", seed, mastered, time.perf_counter() - start))
-            bar.write(describe(runs[-1]))
-        if references:
-            with reference_modules(args.reference) as classes:
-                for dims, kind, seed in itertools.product(spaces, references, seeds):
-                    start = time.perf_counter()
-                    mastered = run_reference(classes[kind], dims, seed, args.episodes, checkpoints, bar)
-                    runs.append(Run(dims, kind, "reference", seed, mastered, time.perf_counter() - start))
-                    bar.write(describe(runs[-1]))
-
-    print(summarise(runs, checkpoints, skipped))
-    args.json.write_text(
-        json.dumps(
-            {
-                "command": " ".join(sys.argv),
-                "episodes": args.episodes,
-                "seeds": list(seeds),
-                "checkpoints": checkpoints,
-                "runs": [asdict(run) for run in runs],
-                "skipped": skipped,
-            },
-            indent=1,
+    with sole_writer(args.out):
+        runs = load_runs(args.out)
+        other = sorted({run.id.episodes for run in runs} - {args.episodes})
+        if other:
+            parser.error(f"{args.out} holds runs of {other} episodes; a file holds one --episodes: give another --out")
+        planned = [
+            RunId(dims, kind, "ours", seed, canonical(params.get(kind, {})), args.batch, args.episodes)
+            for dims, kind, seed in itertools.product(spaces, kinds, seeds)
+        ] + [
+            RunId(dims, kind, "reference", seed, canonical({}), 1, args.episodes)
+            for dims, kind, seed in itertools.product(spaces, references, seeds)
+        ]
+        finished = {run.id for run in runs}
+        todo = [run_id for run_id in planned if run_id not in finished]
+        print(
+            f"{args.out}: {len(runs)} runs recorded; skipping {len(planned) - len(todo)} of the {len(planned)} "
+            f"runs asked for as done, {len(todo)} to go"
         )
-    )
-    print(f"every run: {args.json}")
+        signal.signal(signal.SIGTERM, stop_on_sigterm)
+        try:
+            with tqdm(
+                total=args.episodes * len(planned),
+                initial=args.episodes * (len(planned) - len(todo)),
+                desc="toy episodes",
+                unit="ep",
+                smoothing=0.05,
+            ) as bar:
+
+                def finish(run: Run) -> None:
+                    append_run(args.out, run)
+                    runs.append(run)
+                    bar.write(describe(run))
+
+                execute(todo, args.batch, args.reference, checkpoints, bar, finish)
+        except KeyboardInterrupt:
+            raise SystemExit(f"stopped; {len(runs)} runs are in {args.out}: run the same command to resume") from None
+
+    print(summarise(runs, checkpoints))
+    if args.json is not None:
+        record = {
+            "command": " ".join(sys.argv),
+            "results": str(args.out),
+            "episodes": args.episodes,
+            "checkpoints": checkpoints,
+            "runs": [run.record() for run in runs],
+        }
+        args.json.write_text(json.dumps(record, indent=1))
+    print(f"every run: {args.out}")
 
 
 if __name__ == "__main__":
