@@ -7,7 +7,7 @@ observation normaliser; ``snapshot()`` is what the workers act with.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -37,6 +37,56 @@ def compute_advantages(batch: TrajectoryBatch, gamma: float, gae_lambda: float) 
         advantages[step] = running
         next_values = batch.values[step]
     return advantages, advantages + batch.values
+
+
+class PPOLosses(NamedTuple):
+    """One minibatch's losses: ``total`` is what the optimiser minimises, the rest are its parts and
+    diagnostics (the statistics ``PPOLearner.update`` averages into its metrics)."""
+
+    total: torch.Tensor
+    policy_loss: torch.Tensor
+    value_loss: torch.Tensor
+    entropy: torch.Tensor
+    approx_kl: torch.Tensor
+    clip_fraction: torch.Tensor
+
+
+def ppo_losses(
+    new_log_probs: torch.Tensor,
+    old_log_probs: torch.Tensor,
+    advantages: torch.Tensor,
+    new_values: torch.Tensor,
+    old_values: torch.Tensor,
+    returns: torch.Tensor,
+    entropy: torch.Tensor,
+    config: PPOConfig,
+) -> PPOLosses:
+    """The clipped-surrogate, value and entropy terms for one minibatch, each input one entry per step.
+
+    A pure function of its tensors (no network, no optimiser) so that a fixed minibatch can be checked
+    by hand. The policy loss takes the pessimistic (larger) of the unclipped and clipped surrogates;
+    with ``clip_value_loss`` the value loss takes the larger of the two squared errors.
+    """
+    log_ratio = new_log_probs - old_log_probs
+    ratio = log_ratio.exp()
+
+    adv = advantages
+    if config.normalize_advantages and len(adv) > 1:
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+    clipped_ratio = ratio.clamp(1 - config.clip_coef, 1 + config.clip_coef)
+    policy_loss = torch.max(-adv * ratio, -adv * clipped_ratio).mean()
+
+    value_error = (new_values - returns) ** 2
+    if config.clip_value_loss:
+        clipped = old_values + (new_values - old_values).clamp(-config.clip_coef, config.clip_coef)
+        value_error = torch.max(value_error, (clipped - returns) ** 2)
+    value_loss = 0.5 * value_error.mean()
+
+    total = policy_loss - config.entropy_coef * entropy.mean() + config.value_coef * value_loss
+    with torch.no_grad():
+        approx_kl = ((ratio - 1) - log_ratio).mean()
+        clip_fraction = ((ratio - 1).abs() > config.clip_coef).float().mean()
+    return PPOLosses(total, policy_loss, value_loss, entropy.mean(), approx_kl, clip_fraction)
 
 
 class PPOLearner:
@@ -98,34 +148,24 @@ class PPOLearner:
             for start in range(0, size, cfg.minibatch_size):
                 idx = order[start : start + cfg.minibatch_size]
                 new_log_probs, entropy, new_values = self.network.evaluate(observations[idx], actions[idx])
-                log_ratio = new_log_probs - old_log_probs[idx]
-                ratio = log_ratio.exp()
-
-                adv = advantages[idx]
-                if cfg.normalize_advantages and len(idx) > 1:
-                    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
-
-                value_error = (new_values - returns[idx]) ** 2
-                if cfg.clip_value_loss:
-                    clipped = old_values[idx] + (new_values - old_values[idx]).clamp(-cfg.clip_coef, cfg.clip_coef)
-                    value_error = torch.max(value_error, (clipped - returns[idx]) ** 2)
-                value_loss = 0.5 * value_error.mean()
-
-                loss = policy_loss - cfg.entropy_coef * entropy.mean() + cfg.value_coef * value_loss
+                losses = ppo_losses(
+                    new_log_probs,
+                    old_log_probs[idx],
+                    advantages[idx],
+                    new_values,
+                    old_values[idx],
+                    returns[idx],
+                    entropy,
+                    cfg,
+                )
                 self.optimizer.zero_grad()
-                loss.backward()  # type: ignore[no-untyped-call]  # torch leaves Tensor.backward unannotated
+                losses.total.backward()  # type: ignore[no-untyped-call]  # torch leaves Tensor.backward unannotated
                 nn.utils.clip_grad_norm_(self.network.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
 
-                with torch.no_grad():
-                    approx_kl = ((ratio - 1) - log_ratio).mean()
-                    stats["clip_fraction"].append(((ratio - 1).abs() > cfg.clip_coef).float().mean())
-                stats["policy_loss"].append(policy_loss.detach())
-                stats["value_loss"].append(value_loss.detach())
-                stats["entropy"].append(entropy.detach().mean())
-                stats["approx_kl"].append(approx_kl)
-            if cfg.target_kl is not None and approx_kl.item() > cfg.target_kl:
+                for name in stats:
+                    stats[name].append(getattr(losses, name).detach())
+            if cfg.target_kl is not None and losses.approx_kl.item() > cfg.target_kl:
                 break
 
         self.normalizer.update(features)
