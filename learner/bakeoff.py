@@ -29,15 +29,11 @@ from tqdm import tqdm
 from common import ENV_ID, ENV_IDS
 from common.schemas import TeacherKind
 from common.task_space import task_space_for
-from learner.arguments import add_override_flags, int_at_least, positive_int
+from learner.arguments import UsageError, add_override_flags, int_at_least, positive_int
 from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.config import LOOPS, TrainConfig
-from learner.evaluate import (
-    EvaluationResult,
-    UsageError,
-    evaluate_checkpoint,
-    write_json,
-)
+from learner.json_file import write_json
 from learner.metrics import METRICS_FILE
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 

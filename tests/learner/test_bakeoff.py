@@ -22,7 +22,7 @@ from learner.bakeoff import (
     steps_to_success,
 )
 from learner.checkpoint import latest_checkpoint, load_checkpoint
-from learner.evaluate import EvaluationResult
+from learner.checkpoint_evaluation import EvaluationResult
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
