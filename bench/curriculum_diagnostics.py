@@ -37,7 +37,7 @@ from gymnasium.utils.seeding import np_random
 from matplotlib.figure import Figure
 
 from common.task_space import KUKA_TASK_SPACE
-from learner.bakeoff import EVALUATION_FILE, RUNS_DIR
+from learner.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
 from learner.config import TrainConfig
 from learner.metrics import METRICS_FILE
 from learner.teacher_process import DATABASE_FILE

@@ -2,15 +2,17 @@
 
 A Gaussian policy with a state-independent log standard deviation; actions are sampled unbounded
 and clipped to the action box by whoever steps the environment, so log-probabilities stay exact.
-Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store) and
-run it through ``InferencePolicy``, which prepares observations as in training: angles become
-(sin, cos) features (``ObservationFeatures``), then the normaliser's statistics apply.
+Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store): the
+network's layers as read from its modules, in order. They run it through ``InferencePolicy``, which
+prepares observations as in training (angles become (sin, cos) features, ``ObservationFeatures``,
+then the normaliser's statistics apply) and runs those layers in numpy.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -111,20 +113,87 @@ class ActorCritic(nn.Module):
         return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - _LOG_SQRT_2PI).sum(-1)
 
 
+NUMPY_ACTIVATIONS: dict[type[nn.Module], Callable[[np.ndarray], np.ndarray]] = {nn.Tanh: np.tanh}
+"""The activation modules ``InferencePolicy`` can run, each with the numpy function that does its work."""
+
+
+@dataclass(frozen=True)
+class DenseLayer:
+    """One ``nn.Linear`` of a network head as numpy, with the activations the head applies after it."""
+
+    weight: np.ndarray
+    """(out_features, in_features), as torch stores it."""
+    bias: np.ndarray
+    activations: tuple[Callable[[np.ndarray], np.ndarray], ...]
+
+
+def dense_layers(head: nn.Module) -> tuple[DenseLayer, ...]:
+    """The head's layers as numpy, in the order its forward pass runs them, read from the module itself.
+
+    A head is an ``nn.Linear`` or an ``nn.Sequential`` (nested ones included) of ``nn.Linear`` and
+    activations from ``NUMPY_ACTIVATIONS``, starting with a Linear. Anything else raises
+    ``TypeError`` here, when the policy is captured, rather than acting differently from the network.
+    """
+    layers: list[DenseLayer] = []
+    for module in _in_order(head):
+        if isinstance(module, nn.Linear):
+            bias = np.zeros(module.out_features) if module.bias is None else _numpy(module.bias)
+            layers.append(DenseLayer(_numpy(module.weight), bias, ()))
+        elif type(module) in NUMPY_ACTIVATIONS and layers:
+            last = layers[-1]
+            layers[-1] = replace(last, activations=(*last.activations, NUMPY_ACTIVATIONS[type(module)]))
+        else:
+            raise TypeError(
+                f"InferencePolicy cannot run {module!r}: a head must start with nn.Linear and hold only nn.Linear "
+                f"and {', '.join(kind.__name__ for kind in NUMPY_ACTIVATIONS)} (add a numpy counterpart to "
+                "NUMPY_ACTIVATIONS)"
+            )
+    return tuple(layers)
+
+
+def _in_order(module: nn.Module) -> Iterator[nn.Module]:
+    """The modules a forward pass runs, in order: ``nn.Sequential`` containers are opened, anything else kept."""
+    if isinstance(module, nn.Sequential):
+        for child in module:
+            yield from _in_order(child)
+    else:
+        yield module
+
+
+def _numpy(tensor: torch.Tensor) -> np.ndarray:
+    array: np.ndarray = tensor.detach().cpu().numpy().copy()
+    return array
+
+
 @dataclass(frozen=True)
 class PolicySnapshot:
-    """The weights and normaliser statistics of one policy version, as plain numpy."""
+    """The layers and normaliser statistics of one policy version, as plain numpy."""
 
     spec: PolicySpec
-    weights: dict[str, np.ndarray]
+    actor: tuple[DenseLayer, ...]
+    """The action mean's head."""
+    critic: tuple[DenseLayer, ...]
+    """The value's head."""
+    log_std: np.ndarray
     normalizer: NormalizerState
     obs_clip: float
     version: int
 
     @classmethod
     def capture(cls, network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
-        weights = {name: tensor.detach().cpu().numpy().copy() for name, tensor in network.state_dict().items()}
-        return cls(network.spec, weights, normalizer.state(), normalizer.clip, version)
+        return cls(
+            network.spec,
+            dense_layers(network.actor_mean),
+            dense_layers(network.critic),
+            _numpy(network.actor_log_std),
+            normalizer.state(),
+            normalizer.clip,
+            version,
+        )
+
+
+_Stage = tuple[np.ndarray, np.ndarray, tuple[Callable[[np.ndarray], np.ndarray], ...]]
+"""A ``DenseLayer`` ready to run: weight as (in, out) float32, so the layer is one ``x @ w + b``."""
 
 
 class InferencePolicy:
@@ -132,9 +201,11 @@ class InferencePolicy:
 
     At the batch sizes of environment stepping (a handful of observations), per-operation overhead,
     not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
-    arrays are used as they come, the actor and critic MLPs are fused into one block-diagonal MLP
-    when weights are loaded (half the operations), and the observation normaliser's scale is
-    precomputed. ``ActorCritic.evaluate`` is the reference these numbers must match.
+    layers run as numpy; when the actor and critic heads have the same shape of layers they are
+    fused into one block-diagonal stack when loaded (half the operations), and the observation
+    normaliser's scale is precomputed. The layers are those ``PolicySnapshot.capture`` read from the
+    network's modules, so a change to ``ActorCritic``'s heads needs no change here;
+    ``ActorCritic.evaluate`` is the reference these numbers must match.
     """
 
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
@@ -147,18 +218,10 @@ class InferencePolicy:
     def load(self, snapshot: PolicySnapshot) -> None:
         if snapshot.spec != self.spec:
             raise ValueError(f"snapshot is for {snapshot.spec}, this policy is {self.spec}")
-        weights = snapshot.weights
-        depth = len(self.spec.hidden_sizes) + 1
-        actor = [(weights[f"actor_mean.{2 * i}.weight"], weights[f"actor_mean.{2 * i}.bias"]) for i in range(depth)]
-        critic = [(weights[f"critic.{2 * i}.weight"], weights[f"critic.{2 * i}.bias"]) for i in range(depth)]
-        fused = [(np.concatenate([actor[0][0], critic[0][0]]), np.concatenate([actor[0][1], critic[0][1]]))]
-        fused += [
-            (_block_diagonal(a_weight, c_weight), np.concatenate([a_bias, c_bias]))
-            for (a_weight, a_bias), (c_weight, c_bias) in zip(actor[1:], critic[1:], strict=True)
-        ]
-        # Stored as (in, out) so a layer is one ``x @ w + b``.
-        self._layers = [(np.ascontiguousarray(w.T, dtype=np.float32), b.astype(np.float32)) for w, b in fused]
-        log_std = weights["actor_log_std"].astype(np.float64)
+        fused = _fuse(snapshot.actor, snapshot.critic)
+        heads = [fused] if fused is not None else [snapshot.actor, snapshot.critic]
+        self._heads = [[_stage(layer) for layer in head] for head in heads]
+        log_std = snapshot.log_std.astype(np.float64)
         self._std = np.exp(log_std).astype(np.float32)
         self._log_density_offset = float((log_std + _LOG_SQRT_2PI).sum())
         stats = snapshot.normalizer
@@ -170,12 +233,12 @@ class InferencePolicy:
     def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Action means (n, action_dim) and values (n,)."""
         scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
-        hidden = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
-        for weight, bias in self._layers[:-1]:
-            hidden = np.tanh(hidden @ weight + bias)
-        weight, bias = self._layers[-1]
-        output = hidden @ weight + bias
-        return output[:, : self.spec.action_dim], output[:, self.spec.action_dim]
+        inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
+        if len(self._heads) == 1:
+            output = _run(self._heads[0], inputs)
+            return output[:, : self.spec.action_dim], output[:, self.spec.action_dim]
+        actor, critic = self._heads
+        return _run(actor, inputs), _run(critic, inputs)[:, 0]
 
     def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
@@ -186,6 +249,36 @@ class InferencePolicy:
 
     def value(self, observations: np.ndarray) -> np.ndarray:
         return self._forward(observations)[1]
+
+
+def _fuse(actor: tuple[DenseLayer, ...], critic: tuple[DenseLayer, ...]) -> tuple[DenseLayer, ...] | None:
+    """One stack computing both heads side by side (actor outputs first), or None where their layers
+    differ in number or activations. Both heads read the same input, so the first layers stack
+    their rows; later ones are block-diagonal, each half reading its own head's features."""
+    if len(actor) != len(critic) or any(a.activations != c.activations for a, c in zip(actor, critic, strict=True)):
+        return None
+    first = DenseLayer(
+        np.concatenate([actor[0].weight, critic[0].weight]),
+        np.concatenate([actor[0].bias, critic[0].bias]),
+        actor[0].activations,
+    )
+    later = (
+        DenseLayer(_block_diagonal(a.weight, c.weight), np.concatenate([a.bias, c.bias]), a.activations)
+        for a, c in zip(actor[1:], critic[1:], strict=True)
+    )
+    return (first, *later)
+
+
+def _stage(layer: DenseLayer) -> _Stage:
+    return np.ascontiguousarray(layer.weight.T, dtype=np.float32), layer.bias.astype(np.float32), layer.activations
+
+
+def _run(stages: list[_Stage], hidden: np.ndarray) -> np.ndarray:
+    for weight, bias, activations in stages:
+        hidden = hidden @ weight + bias
+        for activation in activations:
+            hidden = activation(hidden)
+    return hidden
 
 
 def _block_diagonal(upper: np.ndarray, lower: np.ndarray) -> np.ndarray:

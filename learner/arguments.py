@@ -1,4 +1,4 @@
-"""Argument types shared by the learner's sub-commands, kept free of heavy imports."""
+"""Argument types and the usage error shared by the learner's sub-commands, kept free of heavy imports."""
 
 from __future__ import annotations
 
@@ -8,6 +8,10 @@ from collections.abc import Callable
 from typing import Any, get_args
 
 from common.schemas import TeacherKind
+
+
+class UsageError(Exception):
+    """Bad input: reported in one line, exit code 2."""
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:

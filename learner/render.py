@@ -23,8 +23,9 @@ from common import ENV_ID
 from common.kuka_env import KukaGraspEnv, make_kuka_env
 from common.policy import InferencePolicy, PolicySnapshot
 from common.task_space import Task
-from learner.arguments import positive_int
-from learner.evaluate import TASK_HELP, UsageError, checkpoint_task, policy_snapshot, read_checkpoint
+from learner.arguments import UsageError, positive_int
+from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
+from learner.kuka_policy import policy_snapshot
 
 STEPS_PER_FRAME = 8
 """A step is 1/240 s of physics: one frame in eight plays at real speed (30 frames per second)."""

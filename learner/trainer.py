@@ -35,9 +35,9 @@ from common.policy import PolicySnapshot
 from common.trajectory import EpisodeStats, TrajectoryBatch
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
-from learner.evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
+from learner.kuka_policy import kuka_policy_spec
 from learner.metrics import MetricsLog
-from learner.network import kuka_policy_spec
+from learner.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
 from learner.ppo import PPOLearner
 from rollout_worker.actor import WorkerSettings
 from rollout_worker.pool import InFlight, WorkerPool

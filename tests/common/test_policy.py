@@ -1,6 +1,9 @@
+import pickle
+
 import numpy as np
 import pytest
 import torch
+from torch import nn
 
 from common.normalizer import RunningNormalizer
 from common.policy import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
@@ -36,6 +39,99 @@ def test_inference_matches_the_training_network_on_normalised_observations(train
     deterministic, _, _ = policy.act(observations, deterministic=True)
     assert deterministic == pytest.approx(network.actor_mean(inputs).detach().numpy(), abs=1e-5)
     assert policy.version == 7
+
+
+def assert_matches_the_network(network: ActorCritic, normalizer: RunningNormalizer, snapshot: PolicySnapshot) -> None:
+    """Sampled actions' log-probabilities, values and deterministic actions as the torch network computes them."""
+    spec = network.spec
+    policy = InferencePolicy(snapshot, seed=5)
+    observations = np.random.default_rng(2).normal(50.0, 4.0, size=(9, spec.obs_dim)).astype(np.float32)
+
+    actions, log_probs, values = policy.act(observations)
+    deterministic, _, _ = policy.act(observations, deterministic=True)
+
+    inputs = torch.from_numpy(normalizer.normalize(ObservationFeatures(spec)(observations)))
+    expected_log_probs, _, expected_values = network.evaluate(inputs, torch.from_numpy(actions))
+    assert actions.shape == (9, spec.action_dim) and values.shape == (9,)
+    assert log_probs == pytest.approx(expected_log_probs.detach().numpy(), abs=1e-4)
+    assert values == pytest.approx(expected_values.detach().numpy(), abs=1e-4)
+    assert deterministic == pytest.approx(network.actor_mean(inputs).detach().numpy(), abs=1e-4)
+
+
+def perturbed(network: ActorCritic) -> ActorCritic:
+    """Weights far from their initialisation (the output layers start near zero, which hides mistakes)."""
+    with torch.no_grad():
+        for parameter in network.parameters():
+            parameter.add_(0.3 * torch.randn_like(parameter))
+    return network
+
+
+def fitted_normalizer(spec: PolicySpec) -> RunningNormalizer:
+    normalizer = RunningNormalizer(spec.feature_dim)
+    normalizer.update(ObservationFeatures(spec)(np.random.default_rng(0).normal(50.0, 4.0, size=(200, spec.obs_dim))))
+    return normalizer
+
+
+@pytest.mark.parametrize(
+    ("obs_dim", "action_dim", "hidden_sizes", "angle_indices"),
+    [(5, 2, (), ()), (5, 2, (8,), (0,)), (9, 3, (32, 16, 8), (1, 4)), (4, 1, (64, 64), ())],
+    ids=["linear", "one-hidden", "three-hidden", "kuka-width"],
+)
+def test_inference_follows_networks_of_every_size(obs_dim, action_dim, hidden_sizes, angle_indices):
+    torch.manual_seed(1)
+    spec = PolicySpec(obs_dim, action_dim, hidden_sizes, init_log_std=-0.7, angle_indices=angle_indices)
+    network, normalizer = perturbed(ActorCritic(spec)), fitted_normalizer(spec)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+
+def test_layers_added_to_the_network_are_followed_without_a_change_to_inference():
+    """The numpy policy reads the network's layers: a head made deeper, with heads of different depths
+    (so they cannot be fused), and with nested containers, still acts as the network does."""
+    torch.manual_seed(2)
+    spec = PolicySpec(obs_dim=6, action_dim=2, hidden_sizes=(8, 8))
+    network = ActorCritic(spec)
+    network.actor_mean.append(nn.Tanh())
+    network.actor_mean.append(nn.Sequential(nn.Linear(2, 5), nn.Tanh(), nn.Tanh(), nn.Linear(5, 2)))
+    network, normalizer = perturbed(network), fitted_normalizer(spec)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+    network.critic.insert(2, nn.Linear(8, 8))  # the critic deeper too, still not the actor's shape
+    network.critic.insert(3, nn.Tanh())
+    perturbed(network)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=1))
+
+
+def test_heads_with_the_same_depth_but_other_activations_each_keep_their_own():
+    torch.manual_seed(3)
+    spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 8))
+    network = ActorCritic(spec)
+    network.critic.insert(1, nn.Tanh())  # tanh(tanh(x)) after the critic's first layer only
+    network, normalizer = perturbed(network), fitted_normalizer(spec)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+
+@pytest.mark.parametrize(
+    "module", [nn.ReLU(), nn.LayerNorm(8), nn.Dropout(0.1)], ids=lambda module: type(module).__name__
+)
+def test_a_layer_inference_cannot_run_is_refused_when_the_policy_is_captured(module):
+    spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8,))
+    network = ActorCritic(spec)
+    network.critic.insert(1, module)
+    with pytest.raises(TypeError, match=type(module).__name__):
+        PolicySnapshot.capture(network, RunningNormalizer(spec.feature_dim), version=0)
+
+
+def test_a_snapshot_acts_the_same_after_crossing_a_process_boundary(trained_looking):
+    """Ray and the evaluation pool pickle snapshots; the layers' activations must survive that."""
+    network, normalizer = trained_looking
+    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    observations = np.random.default_rng(4).normal(50.0, 4.0, size=(4, 5)).astype(np.float32)
+
+    original = InferencePolicy(snapshot, seed=9).act(observations)
+    copied = InferencePolicy(pickle.loads(pickle.dumps(snapshot)), seed=9).act(observations)
+
+    for before, after in zip(original, copied, strict=True):
+        assert np.array_equal(before, after)
 
 
 def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(trained_looking):

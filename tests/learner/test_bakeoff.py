@@ -11,18 +11,11 @@ from common import HARD_ENV_ID
 from common.cli import main
 from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from common.trajectory import EpisodeStats
-from learner.bakeoff import (
-    BOOK_RETURNS,
-    Run,
-    TeacherResult,
-    learning_curve,
-    median_steps,
-    plan_runs,
-    results_markdown,
-    steps_to_success,
-)
+from learner.bakeoff_report import BOOK_RETURNS, results_markdown
+from learner.bakeoff_runs import Run, learning_curve, plan_runs
+from learner.bakeoff_statistics import TeacherResult, median_steps, steps_to_success
 from learner.checkpoint import latest_checkpoint, load_checkpoint
-from learner.evaluate import EvaluationResult
+from learner.checkpoint_evaluation import EvaluationResult
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128

@@ -14,7 +14,9 @@ from common.kuka_env import KukaGraspEnv, KukaGraspHardEnv
 from common.policy import InferencePolicy
 from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from learner.checkpoint import load_checkpoint
-from learner.evaluate import describe_task, evaluate_policy, parse_task, policy_snapshot
+from learner.checkpoint_arguments import parse_task
+from learner.checkpoint_evaluation import describe_task, evaluate_policy
+from learner.kuka_policy import policy_snapshot
 from learner.stats import mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 

@@ -12,7 +12,7 @@ from common.cli import main
 from common.task_space import KUKA_TASK_SPACE
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import TrainConfig
-from learner.network import kuka_policy_spec
+from learner.kuka_policy import kuka_policy_spec
 from learner.ppo import PPOLearner
 from teacher_service.process import free_port
 

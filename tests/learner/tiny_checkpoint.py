@@ -7,7 +7,7 @@ from pathlib import Path
 from common import ENV_ID
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import PPOConfig, TrainConfig
-from learner.network import kuka_policy_spec
+from learner.kuka_policy import kuka_policy_spec
 from learner.ppo import PPOLearner
 
 TINY_EPISODE_STEPS = 40

@@ -1,4 +1,5 @@
-"""Periodic evaluation: the deterministic policy on its task family's hardest task, over a fixed set of seeds.
+"""Periodic evaluation during training: the deterministic policy on its task family's hardest task, over a
+fixed set of seeds, logged as the run's learning curve.
 
 The seeds never change during a run, so successive evaluations differ only by the policy.
 """

@@ -1,0 +1,261 @@
+"""The bake-off's runs on disk: where each lives, training it to the budget, its final evaluation.
+
+Each teacher x seed is an ordinary ``kuka-curriculum train`` run in ``DIR/runs/<teacher>-seed<k>``,
+started as a child process: it brings its own teacher service and Ray connection, a crash stays
+inside it, and its log goes to the run directory. Everything here can be resumed: a run whose
+checkpoint reached the budget is skipped, a run with an earlier checkpoint continues from it with
+``--resume``, and each final evaluation is cached next to its checkpoint. Ctrl-C is left to the
+training child (it checkpoints and stops); running the same command again carries on.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from common import ENV_ID
+from common.task_space import task_space_for
+from learner.arguments import UsageError
+from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
+from learner.json_file import write_json
+from learner.metrics import METRICS_FILE
+
+RUNS_DIR = "runs"
+SETTINGS_FILE = "bakeoff.json"
+TRAIN_LOG = "train.log"
+EVALUATION_FILE = "evaluation.json"
+POLL_S = 1.0
+
+TRAINING_FLAGS = {
+    "env": "--env",
+    "workers": "--workers",
+    "envs_per_worker": "--envs-per-worker",
+    "rollout_length": "--rollout-length",
+    "max_episode_steps": "--max-episode-steps",
+    "checkpoint_every": "--checkpoint-every",
+    "curve_every": "--eval-every",
+    "curve_episodes": "--eval-episodes",
+    "loop": "--loop",
+}
+"""Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
+REPEATED_FLAGS = {"teacher_params": "--teacher-param", "ppo": "--ppo"}
+"""Bake-off options given as NAME=VALUE pairs, handed to every run as one flag per pair."""
+ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID}
+"""Settings newer than some stored bake-offs, with the value their runs were trained with."""
+
+
+class RunFailed(Exception):
+    """A training child exited with an error."""
+
+
+@dataclass(frozen=True)
+class Run:
+    teacher: str
+    seed: int
+    directory: Path
+
+    @property
+    def name(self) -> str:
+        return self.directory.name
+
+    def steps_done(self) -> int:
+        """Environment steps in the run's latest checkpoint (0 before the first one)."""
+        path = latest_checkpoint(self.directory)
+        return load_checkpoint(path).counters.steps if path else 0
+
+
+def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
+    return [
+        Run(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
+        for teacher in teachers
+        for seed in range(seeds)
+    ]
+
+
+def check_settings(out: Path, settings: dict[str, Any]) -> None:
+    """Runs in one directory must share their hyperparameters; only the step budget may grow.
+
+    The settings of the first invocation are stored in DIR, and a later invocation that differs is
+    refused instead of silently comparing runs trained differently.
+    """
+    path = Path(out) / SETTINGS_FILE
+    if path.exists():
+        stored = ADDED_SETTINGS | json.loads(path.read_text(encoding="utf-8"))
+        differences = [
+            f"{name}: {stored.get(name)!r} before, {value!r} now"
+            for name, value in settings.items()
+            if name != "total_steps" and stored.get(name) != value
+        ]
+        if differences:
+            raise UsageError(
+                f"{out} holds a bake-off with other training settings ({'; '.join(differences)}); "
+                "use the same flags or another --out"
+            )
+        if settings["total_steps"] < stored["total_steps"]:
+            raise UsageError(
+                f"{out} holds runs trained for {stored['total_steps']:_} steps; "
+                f"--total-steps {settings['total_steps']:_} would compare them with shorter ones"
+            )
+    write_json(path, settings)
+
+
+def train_command(
+    run: Run, total_steps: int, settings: dict[str, Any], resume: bool, ray_address: str | None
+) -> list[str]:
+    command = [
+        sys.executable,
+        "-m",
+        "common.cli",
+        "train",
+        "--teacher",
+        run.teacher,
+        "--seed",
+        str(run.seed),
+        "--total-steps",
+        str(total_steps),
+        "--run-dir",
+        str(run.directory),
+    ]
+    for name, flag in TRAINING_FLAGS.items():
+        command += [flag, str(settings[name])]
+    for name, flag in REPEATED_FLAGS.items():
+        for key, value in settings[name].items():
+            command += [flag, f"{key}={json.dumps(value)}"]
+    if ray_address is not None:
+        command += ["--ray-address", ray_address]
+    return command + (["--resume"] if resume else [])
+
+
+def _clear_unfinished_start(run: Run) -> None:
+    """A run that stopped before its first checkpoint restarts from nothing; keep only its log."""
+    if run.directory.is_dir():
+        for entry in run.directory.iterdir():
+            if entry.name != TRAIN_LOG:
+                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+
+
+def _metrics_records(run: Run) -> list[dict[str, Any]]:
+    """The run's metric records; a line cut short (a crash mid-write, or the child writing now) is left out."""
+    path = run.directory / METRICS_FILE
+    records = []
+    for line in path.read_text(encoding="utf-8").splitlines() if path.exists() else []:
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def _logged_steps(run: Run) -> int:
+    records = _metrics_records(run)
+    return int(records[-1]["step"]) if records else 0
+
+
+def learning_curve(run: Run, metric: str = "eval/return") -> dict[int, float]:
+    """A hardest-task evaluation metric by environment step, from the run's metrics log.
+
+    An interrupted run repeats the iterations after its last checkpoint, so a step logged twice
+    keeps its latest record.
+    """
+    return {
+        int(record["step"]): float(record[metric]) for record in _metrics_records(run) if record.get(metric) is not None
+    }
+
+
+def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_runs: int) -> bool:
+    """Run one training child to its end; False when it was interrupted (Ctrl-C).
+
+    While it runs this process ignores Ctrl-C, which reaches the child too: the child finishes its
+    iteration and writes a checkpoint, then the bake-off stops.
+    """
+    interrupted = False
+
+    def note_interrupt(signum: int, frame: Any) -> None:
+        nonlocal interrupted
+        interrupted = True
+
+    run.directory.mkdir(parents=True, exist_ok=True)
+    log_path = run.directory / TRAIN_LOG
+    previous = signal.signal(signal.SIGINT, note_interrupt)
+    try:
+        with log_path.open("ab") as log:
+            child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+            while child.poll() is None:
+                time.sleep(POLL_S)
+                progress.update(steps_of_other_runs + _logged_steps(run) - progress.n)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if interrupted:
+        return False
+    if child.returncode != 0:
+        tail = "\n".join(log_path.read_text(encoding="utf-8", errors="replace").splitlines()[-15:])
+        raise RunFailed(f"training {run.name} exited with code {child.returncode}; see {log_path}:\n{tail}")
+    return True
+
+
+def train_runs(runs: Sequence[Run], total_steps: int, settings: dict[str, Any], ray_address: str | None) -> bool:
+    """Bring every run to ``total_steps``, one after the other: finished runs are skipped, started ones
+    resumed from their checkpoint. False when interrupted (Ctrl-C); the same call later carries on."""
+    done = {run.name: run.steps_done() for run in runs}
+
+    def counted(run: Run) -> int:
+        return min(done[run.name], total_steps)
+
+    # Steps trained in earlier sessions start the bar, so its rate and ETA count this session's steps only.
+    total = len(runs) * total_steps
+    already = sum(counted(run) for run in runs)
+    with tqdm(
+        total=total, initial=already, unit="step", unit_scale=True, desc="bake-off", dynamic_ncols=True
+    ) as progress:
+        for run in runs:
+            if done[run.name] >= total_steps:
+                progress.write(f"{run.name}: finished at {done[run.name]:_} steps, skipped")
+                continue
+            resume = done[run.name] > 0
+            if resume:
+                (run.directory / EVALUATION_FILE).unlink(missing_ok=True)
+            else:
+                _clear_unfinished_start(run)
+            progress.write(
+                f"{run.name}: {'resuming at ' + format(done[run.name], '_') if resume else 'training'} "
+                f"(log: {run.directory / TRAIN_LOG})"
+            )
+            command = train_command(run, total_steps, settings, resume, ray_address)
+            steps_of_other_runs = sum(counted(other) for other in runs if other is not run)
+            finished = train_run(run, command, progress, steps_of_other_runs) and run.steps_done() >= total_steps
+            if not finished:
+                progress.write("interrupted; run the same command again to resume")
+                return False
+            done[run.name] = run.steps_done()
+    return True
+
+
+def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_id: str = ENV_ID) -> EvaluationResult:
+    """The final policy on its environment's hardest task, cached with the checkpoint it came from."""
+    checkpoint = latest_checkpoint(run.directory)
+    assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
+    cache = run.directory / EVALUATION_FILE
+    if cache.exists():
+        cached = json.loads(cache.read_text(encoding="utf-8"))
+        if (
+            cached["checkpoint"] == checkpoint.name
+            and cached["episodes"] == episodes
+            and cached["seed"] == seed
+            and cached.get("env", ENV_ID) == env_id
+        ):
+            return EvaluationResult.from_dict(cached)
+    task = task_space_for(env_id).hardest()
+    result = evaluate_checkpoint(load_checkpoint(checkpoint), task, episodes, seed, processes)
+    write_json(cache, {"checkpoint": checkpoint.name, **result.to_dict()})
+    return result

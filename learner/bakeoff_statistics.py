@@ -1,0 +1,83 @@
+"""What a bake-off concludes from its runs: each teacher's figures over seeds, with their intervals,
+and how many steps each seed took to reach the success target. Pure computation over the runs'
+evaluations and metrics logs; nothing here writes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from common import ENV_ID
+from learner.bakeoff_runs import Run, learning_curve
+from learner.checkpoint_evaluation import EvaluationResult
+from learner.stats import Interval, mean_interval, wilson_interval
+
+SUCCESS_TARGET = 0.8
+"""The success rate on the hardest task whose first crossing the report times."""
+CURVE_WINDOW = 3
+"""Consecutive in-run evaluations pooled for that reading, so it is not one small evaluation's luck."""
+
+
+def steps_to_success(run: Run, target: float = SUCCESS_TARGET, window: int = CURVE_WINDOW) -> int | None:
+    """The first step at which the last ``window`` in-run evaluations, pooled, reach ``target`` success
+    (they share their episode count, so pooling is their mean); None if they never do."""
+    curve = sorted(learning_curve(run, "eval/success_rate").items())
+    for end in range(window, len(curve) + 1):
+        if np.mean([rate for _, rate in curve[end - window : end]]) >= target:
+            return curve[end - 1][0]
+    return None
+
+
+def median_steps(steps: Sequence[int | None]) -> float | None:
+    """The median over seeds, a seed that never got there counting as slower than all; None if the
+    median seed never got there."""
+    ordered = sorted(math.inf if value is None else value for value in steps)
+    middle = len(ordered) // 2
+    median = ordered[middle] if len(ordered) % 2 else (ordered[middle - 1] + ordered[middle]) / 2
+    return None if math.isinf(median) else float(median)
+
+
+@dataclass(frozen=True)
+class TeacherResult:
+    teacher: str
+    runs: tuple[Run, ...]
+    evaluations: tuple[EvaluationResult, ...]
+    env: str = ENV_ID
+    """The environment the runs trained and were evaluated on."""
+
+    @property
+    def returns(self) -> Interval:
+        """Pooled over every seed's episodes; ``seed_returns`` shows the spread between seeds."""
+        return mean_interval([episode.reward for result in self.evaluations for episode in result.episodes])
+
+    @property
+    def success_rate(self) -> Interval:
+        episodes = [episode for result in self.evaluations for episode in result.episodes]
+        return wilson_interval(sum(episode.success for episode in episodes), len(episodes))
+
+    @property
+    def seed_returns(self) -> list[float]:
+        return [result.returns.estimate for result in self.evaluations]
+
+    @property
+    def seed_success_rates(self) -> list[float]:
+        return [result.success_rate.estimate for result in self.evaluations]
+
+    @property
+    def success_over_seeds(self) -> Interval:
+        """The mean of the seeds' success rates, with a Student-t interval over seeds (cut to [0, 1]):
+        what a new seed may give."""
+        interval = mean_interval(self.seed_success_rates)
+        return replace(interval, low=max(interval.low, 0.0), high=min(interval.high, 1.0))
+
+    @property
+    def return_over_seeds(self) -> Interval:
+        return mean_interval(self.seed_returns)
+
+    @property
+    def seed_steps_to_success(self) -> list[int | None]:
+        return [steps_to_success(run) for run in self.runs]

@@ -1,0 +1,31 @@
+"""The KUKA policy: its network's shape, one definition for training and evaluation, and the policy
+a checkpoint holds."""
+
+from __future__ import annotations
+
+from common.kuka_env import KukaGraspEnv
+from common.policy import PolicySnapshot, PolicySpec
+from learner.checkpoint import Checkpoint
+from learner.config import PPOConfig
+from learner.ppo import PPOLearner
+
+
+def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
+    probe = KukaGraspEnv()
+    try:
+        return PolicySpec(
+            obs_dim=probe.observation_space.shape[0],
+            action_dim=probe.action_space.shape[0],
+            hidden_sizes=ppo.hidden_sizes,
+            init_log_std=ppo.init_log_std,
+            angle_indices=probe.angle_indices if ppo.angle_features else (),
+        )
+    finally:
+        probe.close()
+
+
+def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
+    """The policy a checkpoint holds, in the form the rollout workers act with."""
+    learner = PPOLearner(kuka_policy_spec(checkpoint.config.ppo), checkpoint.config.ppo, checkpoint.config.seed)
+    learner.load_state_dict(checkpoint.learner)
+    return learner.snapshot()
