@@ -177,7 +177,7 @@ def main() -> int:
             results = [{"task_id": t["task_id"], "reward": student_reward(t["params"], 3.0)} for t in tasks]
             client.post("/results", json={"results": results}).raise_for_status()
             for task, result in zip(tasks, results, strict=True):
-                assert teacher.update(EpisodeResult(task["params"], result["reward"])) is None, "keep fits out"
+                assert teacher.learn(EpisodeResult(task["params"], result["reward"])) is None, "keep fits out"
             same_before &= same
     service.kill()
     print(

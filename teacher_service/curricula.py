@@ -168,7 +168,7 @@ class Curriculum:
 
     async def issue(self, count: int) -> list[IssuedTask]:
         """Draw tasks and answer once they are on disk."""
-        first = self.teacher.tasks_sampled
+        first = self.teacher.tasks_drawn
         results_seen = self.teacher.results_seen
         tasks = [self.space.validate(task) for task in self.teacher.sample(count)]
         issued_at = time.time()
@@ -273,7 +273,7 @@ class Curriculum:
             self._expired_tasks_counter.inc(expired)
 
     def _learn(self, index: int, task: Task, reward: float, success: bool | None, length: int | None) -> FitJob | None:
-        job = self.teacher.update(EpisodeResult(task, reward, success, length))
+        job = self.teacher.learn(EpisodeResult(task, reward, success, length))
         self.results_received += 1
         self._last_result_index = index
         return job
@@ -316,7 +316,7 @@ class Curriculum:
         return (
             self.id,
             outcome.index,
-            self.teacher.tasks_sampled,
+            self.teacher.tasks_drawn,
             self.teacher.results_seen,
             outcome.started_at,
             outcome.finished_at,
@@ -433,8 +433,8 @@ class Curriculum:
         answered: set[int] = set()
 
         def draw_to(count: int) -> None:
-            if count > teacher.tasks_sampled:
-                teacher.skip(count - teacher.tasks_sampled)
+            if count > teacher.tasks_drawn:
+                teacher.skip(count - teacher.tasks_drawn)
 
         def install_recorded(results_applied: int) -> None:
             while due and (fit := recorded.get(due[0].index)) and fit.results_seen <= results_applied:
