@@ -38,10 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common.schemas import API_PREFIX, ParameterSpec, ResultItem  # noqa: E402
 from common.task_space import KUKA_TASK_SPACE  # noqa: E402
 from teacher_service.core.config import Settings  # noqa: E402
-from teacher_service.curricula import CurriculumRegistry  # noqa: E402
 from teacher_service.curriculum_spec import AlpGmmCurriculum  # noqa: E402
 from teacher_service.metrics import ServiceMetrics  # noqa: E402
 from teacher_service.process import ServiceProcess  # noqa: E402
+from teacher_service.registry import CurriculumRegistry  # noqa: E402
 from teacher_service.store import Store  # noqa: E402
 from teacher_service.teachers import EpisodeResult, Teacher  # noqa: E402
 from teacher_service.teachers.alp_gmm import AlpGmmParams  # noqa: E402
