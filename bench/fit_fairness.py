@@ -59,7 +59,7 @@ class Curriculum:
         """Feed results until a fit falls due."""
         while True:
             task = self.teacher.sample(1)[0]
-            job = self.teacher.update(EpisodeResult(task, reward(task, self.teacher.results_seen)))
+            job = self.teacher.learn(EpisodeResult(task, reward(task, self.teacher.results_seen)))
             if job is not None:
                 return job
 

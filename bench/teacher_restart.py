@@ -38,10 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common.schemas import API_PREFIX, ParameterSpec, ResultItem  # noqa: E402
 from common.task_space import KUKA_TASK_SPACE  # noqa: E402
 from teacher_service.core.config import Settings  # noqa: E402
-from teacher_service.curricula import CurriculumRegistry  # noqa: E402
 from teacher_service.curriculum_spec import AlpGmmCurriculum  # noqa: E402
 from teacher_service.metrics import ServiceMetrics  # noqa: E402
 from teacher_service.process import ServiceProcess  # noqa: E402
+from teacher_service.registry import CurriculumRegistry  # noqa: E402
 from teacher_service.store import Store  # noqa: E402
 from teacher_service.teachers import EpisodeResult, Teacher  # noqa: E402
 from teacher_service.teachers.alp_gmm import AlpGmmParams  # noqa: E402
@@ -177,7 +177,7 @@ def main() -> int:
             results = [{"task_id": t["task_id"], "reward": student_reward(t["params"], 3.0)} for t in tasks]
             client.post("/results", json={"results": results}).raise_for_status()
             for task, result in zip(tasks, results, strict=True):
-                assert teacher.update(EpisodeResult(task["params"], result["reward"])) is None, "keep fits out"
+                assert teacher.learn(EpisodeResult(task["params"], result["reward"])) is None, "keep fits out"
             same_before &= same
     service.kill()
     print(

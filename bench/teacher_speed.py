@@ -39,7 +39,7 @@ def fitted_teacher(seed: int) -> tuple[AlpGmmTeacher, FitJob]:
     job = None
     for episode in range(2 * FIT_RATE):
         task = teacher.sample(1)[0]
-        job = teacher.update(EpisodeResult(task, progress_reward(task, episode)))
+        job = teacher.learn(EpisodeResult(task, progress_reward(task, episode)))
         if job is not None and episode < FIT_RATE:
             teacher.install(job.run())
     assert job is not None
@@ -64,7 +64,7 @@ def main() -> None:
             refits.append(timed(lambda: teacher.install(job.run())))  # noqa: B023  timed() runs it at once
             samplings.append(timed(lambda: teacher.sample(SAMPLES)))  # noqa: B023  timed() runs it at once
             tasks = teacher.sample(FIT_RATE - 1)
-            updates.append(timed(lambda: [teacher.update(EpisodeResult(t, 0.5)) for t in tasks]) / len(tasks))  # noqa: B023  timed() runs it at once
+            updates.append(timed(lambda: [teacher.learn(EpisodeResult(t, 0.5)) for t in tasks]) / len(tasks))  # noqa: B023  timed() runs it at once
 
     print(f"ALP-GMM in {DIMS} dimensions, one BLAS thread, {args.repeats} teachers (median, max):")
     print(f"  refit on {FIT_RATE} points, k=2..10:  {statistics.median(refits):.3f} s, {max(refits):.3f} s")

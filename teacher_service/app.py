@@ -19,9 +19,9 @@ from teacher_service.api.errors import store_error_handler, validation_error_han
 from teacher_service.api.hosts import AllowedHostsMiddleware
 from teacher_service.api.routes import curricula, health, teachers
 from teacher_service.core.config import ANY_HOST, Settings
-from teacher_service.curricula import CurriculumRegistry
 from teacher_service.dashboard import router as dashboard_router
 from teacher_service.metrics import MetricsMiddleware, ServiceMetrics
+from teacher_service.registry import CurriculumRegistry
 from teacher_service.store import Store, StoreError
 
 YOUNG_GENERATION_THRESHOLD = 20_000

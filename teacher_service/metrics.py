@@ -1,4 +1,5 @@
-"""Prometheus metrics of one service instance, and the ASGI middleware that times requests.
+"""The service's measurements: its Prometheus metrics, each curriculum's share of them, the
+results-per-second rate the API reports, and the ASGI middleware that times requests.
 
 Each app gets its own registry so several apps (tests) can live in one process.
 """
@@ -6,6 +7,7 @@ Each app gets its own registry so several apps (tests) can live in one process.
 from __future__ import annotations
 
 import time
+from collections import deque
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -75,6 +77,42 @@ class ServiceMetrics:
 
     def render(self) -> bytes:
         return generate_latest(self.registry)
+
+    def for_curriculum(self, name: str) -> CurriculumMetrics:
+        return CurriculumMetrics(self, name)
+
+
+class CurriculumMetrics:
+    """One curriculum's labelled series, looked up once rather than on every request."""
+
+    def __init__(self, metrics: ServiceMetrics, name: str) -> None:
+        self.tasks_issued = metrics.tasks_issued.labels(name)
+        self.tasks_expired = metrics.tasks_expired.labels(name)
+        self.results_expired = metrics.results.labels(name, "expired")
+        self.results_accepted = metrics.results.labels(name, "accepted")
+        self.results_duplicate = metrics.results.labels(name, "duplicate")
+        self.fits = metrics.fits.labels(name)
+        self.fit_errors = metrics.fit_errors.labels(name)
+        self.fit_seconds = metrics.fit_seconds.labels(name)
+        self.fits_pending = metrics.fits_pending.labels(name)
+
+
+class RateCounter:
+    """Events per second over the last ``window_s`` seconds (or since counting began, if sooner)."""
+
+    def __init__(self, window_s: float, since: float) -> None:
+        self._window = window_s
+        self._counting_since = since
+        self._arrivals: deque[tuple[float, int]] = deque()
+
+    def count(self, now: float, events: int) -> None:
+        self._arrivals.append((now, events))
+        while self._arrivals and self._arrivals[0][0] < now - self._window:
+            self._arrivals.popleft()
+
+    def per_second(self, now: float) -> float:
+        recent = sum(events for at, events in self._arrivals if at >= now - self._window)
+        return recent / max(min(self._window, now - self._counting_since), 1e-3)
 
 
 class MetricsMiddleware:

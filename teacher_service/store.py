@@ -1,4 +1,7 @@
-"""SQLite persistence for curricula, issued tasks, accepted results, fits and teacher snapshots.
+"""The persistence layer: SQLite storage for curricula, issued tasks, accepted results, fits and
+teacher snapshots. It owns every SQL string and the mapping between rows and typed records; the
+rest of the service hands it records (``NewTask``, ``NewResult``, ``StoredFit``,
+``TeacherSnapshot``) and gets records back, never rows or SQL.
 
 Every write is committed before the request that made it is answered. Writes are group-committed
 on the event loop: whatever the loop queued while handling one round of ready requests goes into
@@ -22,7 +25,7 @@ import asyncio
 import json
 import logging
 import sqlite3
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -101,12 +104,12 @@ _MIGRATIONS = {0: _SCHEMA_V1, 1: _MIGRATE_V1_TO_V2}
 HISTORY_CHUNK_ROWS = 65_536
 """Most history rows in one chunk, so the first snapshot of a long replay is not one huge blob."""
 
-INSERT_CURRICULUM = "INSERT INTO curricula (id, name, spec, created_at) VALUES (?, ?, ?, ?)"
-INSERT_TASK = "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
-INSERT_RESULT = (
+_INSERT_CURRICULUM = "INSERT INTO curricula (id, name, spec, created_at) VALUES (?, ?, ?, ?)"
+_INSERT_TASK = "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
+_INSERT_RESULT = (
     "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at) VALUES (?, ?, ?, ?, ?, ?)"
 )
-INSERT_FIT = (  # REPLACE: a restart records again a fit it ran because the live row was missing or had no model
+_INSERT_FIT = (  # REPLACE: a restart records again a fit it ran because the live row was missing or had no model
     "INSERT OR REPLACE INTO fits"
     " (curriculum_id, fit_index, tasks_sampled, results_seen, started_at, finished_at, error, model)"
     " VALUES (?, ?, ?, ?, ?, ?, ?, ?)"
@@ -121,8 +124,11 @@ _PUT_HISTORY_CHUNK = (
     "INSERT OR REPLACE INTO history_chunks (curriculum_id, first_row, row_count, width, data) VALUES (?, ?, ?, ?, ?)"
 )
 
-Statements = list[tuple[str, list[tuple[Any, ...]]]]
+_Statements = list[tuple[str, list[tuple[Any, ...]]]]
 """SQL statements, each with the rows to run it on (``executemany``)."""
+
+Callback = Callable[[], object] | None
+"""Run once a write is committed (``on_commit``) or refused (``on_abort``); its result is ignored."""
 
 
 class StoreError(RuntimeError):
@@ -156,10 +162,42 @@ class StoredResult:
 
 
 @dataclass(frozen=True)
+class NewTask:
+    """A task being handed out, as the ``tasks`` table stores it."""
+
+    index: int
+    task: Task
+    results_seen: int
+    """Results the teacher had learned from when it drew this task."""
+    issued_at: float
+
+
+@dataclass(frozen=True)
+class NewResult:
+    """An accepted result being stored; the task it answers is already stored."""
+
+    task_index: int
+    reward: float
+    success: bool | None
+    length: int | None
+    received_at: float
+
+
+@dataclass(frozen=True)
+class AwaitedTask:
+    """A stored task a restart may still await a result for."""
+
+    index: int
+    task: Task
+    issued_at: float
+
+
+@dataclass(frozen=True)
 class StoredFit:
     index: int
-    tasks_sampled: int
-    """Tasks the teacher had drawn when the fit was installed."""
+    tasks_drawn: int
+    """Tasks the teacher had drawn (its ``tasks_drawn``) when the fit was installed; the
+    ``tasks_sampled`` column."""
     results_seen: int
     started_at: float
     finished_at: float
@@ -177,8 +215,10 @@ class TeacherSnapshot:
     last_task_index: int | None
     """Task answered by the last of those results; the restart replays the results stored after it."""
     tasks_issued: int
-    issued_through: int
-    """One past the highest task index stored by then; tasks from here on were issued later."""
+    """Tasks handed out (stored) by then."""
+    issued_index_end: int
+    """One past the highest task index stored by then; tasks from here on were issued later (the
+    ``issued_through`` column)."""
     outstanding: list[int]
     """Tasks awaiting a result then (at most ``KC_TASK_WINDOW``)."""
     fits_waiting: list[int]
@@ -195,14 +235,14 @@ class StoredSnapshot:
     results_seen: int
     last_seq: int
     tasks_issued: int
-    issued_through: int
+    issued_index_end: int
     outstanding: list[int]
     fits_waiting: list[int]
     history_rows: int
     teacher: dict[str, Any]
 
 
-def snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> Statements:
+def _snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> _Statements:
     """The write that stores ``snapshot``: it replaces the curriculum's previous one, and appends the
     new history rows, atomically, so the chunks always end where the stored snapshot does."""
     rows = np.ascontiguousarray(snapshot.history, dtype="<f8")
@@ -217,7 +257,7 @@ def snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> Statem
         snapshot.results_seen,
         snapshot.last_task_index,
         snapshot.tasks_issued,
-        snapshot.issued_through,
+        snapshot.issued_index_end,
         json.dumps(snapshot.outstanding),
         json.dumps(snapshot.fits_waiting),
         snapshot.history_from + len(rows),
@@ -234,6 +274,19 @@ _SELECT_RESULTS = (
 _FIT_COLUMNS = "fit_index, tasks_sampled, results_seen, started_at, finished_at, error"
 
 
+def _fit_row(curriculum_id: int, fit: StoredFit) -> tuple[Any, ...]:
+    return (
+        curriculum_id,
+        fit.index,
+        fit.tasks_drawn,
+        fit.results_seen,
+        fit.started_at,
+        fit.finished_at,
+        fit.error,
+        fit.model,
+    )
+
+
 def _result(row: tuple[Any, ...]) -> StoredResult:
     seq, index, params, reward, success, length, received_at = row
     return StoredResult(
@@ -243,16 +296,17 @@ def _result(row: tuple[Any, ...]) -> StoredResult:
 
 @dataclass
 class _Write:
-    statements: Statements
+    statements: _Statements
     future: asyncio.Future[None] | None
-    on_commit: Callable[[], object] | None
-    on_abort: Callable[[], object] | None
+    on_commit: Callback
+    on_abort: Callback
     error: BaseException | None = field(default=None)
 
 
 class Store:
-    """The service's database. Reads and ``write_now`` are for startup; once ``start`` has run,
-    every write goes through ``write`` or ``write_later``, on the event loop thread."""
+    """The service's database. Reads and ``save_replayed_now`` are for startup; once ``start`` has
+    run, every write is queued on the event loop thread and group-committed (``add_*``,
+    ``put_snapshot_later``)."""
 
     def __init__(self, path: Path, synchronous: Literal["FULL", "NORMAL"] = "FULL") -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -288,12 +342,12 @@ class Store:
         ).fetchone()
         if row is None:
             return None
-        results_seen, last_seq, tasks_issued, issued_through, outstanding, waiting, history_rows, teacher = row
+        results_seen, last_seq, tasks_issued, issued_index_end, outstanding, waiting, history_rows, teacher = row
         return StoredSnapshot(
             results_seen,
             last_seq,
             tasks_issued,
-            issued_through,
+            issued_index_end,
             json.loads(outstanding),
             json.loads(waiting),
             history_rows,
@@ -361,9 +415,7 @@ class Store:
         for row in rows:
             yield _result(row)
 
-    def awaited_tasks(
-        self, curriculum_id: int, indices: list[int], first_index: int
-    ) -> Iterator[tuple[int, Task, float]]:
+    def awaited_tasks(self, curriculum_id: int, indices: list[int], first_index: int) -> Iterator[AwaitedTask]:
         """Tasks ``indices`` and every task from ``first_index`` on, each with when it was issued, in
         index order: the tasks a restart may still await results for."""
         lookup = "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index = ?"
@@ -371,14 +423,14 @@ class Store:
             row = self._db.execute(lookup, (curriculum_id, index)).fetchone()
             if row is None:
                 raise StoreError(f"{self.path}: curriculum {curriculum_id} has no task {index}")
-            yield row[0], json.loads(row[1]), row[2]
+            yield AwaitedTask(row[0], json.loads(row[1]), row[2])
         rows = self._db.execute(
             "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index >= ?"
             " ORDER BY task_index",
             (curriculum_id, first_index),
         )
         for index, params, issued_at in rows:
-            yield index, json.loads(params), issued_at
+            yield AwaitedTask(index, json.loads(params), issued_at)
 
     def answered_tasks(self, curriculum_id: int, indices: list[int]) -> set[int]:
         """Which of these tasks have a stored result (at most ``MAX_RESULTS_PER_REQUEST`` of them)."""
@@ -417,10 +469,49 @@ class Store:
         count: int = row[0]
         return count
 
-    def write_now(self, statements: Statements) -> None:
+    def save_replayed_now(self, curriculum_id: int, fits: Sequence[StoredFit], snapshot: TeacherSnapshot) -> None:
+        """Store what a start-up replay computed, in one transaction: the fits it ran again (their
+        rows replace the stored ones) and the snapshot it took after them. Only before ``start``."""
+        fit_rows = [_fit_row(curriculum_id, fit) for fit in fits]
+        self._write_now([(_INSERT_FIT, fit_rows), *_snapshot_statements(curriculum_id, snapshot)])
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """From now on, writes are grouped and committed on ``loop``."""
+        self._loop = loop
+
+    def add_curriculum(self, curriculum: StoredCurriculum, on_abort: Callback = None) -> asyncio.Future[None]:
+        row = (curriculum.id, curriculum.name, curriculum.spec, curriculum.created_at)
+        return self._write([(_INSERT_CURRICULUM, [row])], on_abort=on_abort)
+
+    def add_tasks(
+        self, curriculum_id: int, tasks: Sequence[NewTask], on_commit: Callback = None
+    ) -> asyncio.Future[None]:
+        rows = [(curriculum_id, task.index, json.dumps(task.task), task.results_seen, task.issued_at) for task in tasks]
+        return self._write([(_INSERT_TASK, rows)], on_commit=on_commit)
+
+    def add_results(
+        self, curriculum_id: int, results: Sequence[NewResult], on_commit: Callback = None, on_abort: Callback = None
+    ) -> asyncio.Future[None]:
+        rows = [
+            (curriculum_id, result.task_index, result.reward, result.success, result.length, result.received_at)
+            for result in results
+        ]
+        return self._write([(_INSERT_RESULT, rows)], on_commit=on_commit, on_abort=on_abort)
+
+    def add_fit_later(self, curriculum_id: int, fit: StoredFit) -> None:
+        """Record a fit that came back (installed or failed); nobody waits for it."""
+        self._write_later([(_INSERT_FIT, [_fit_row(curriculum_id, fit)])])
+
+    def put_snapshot_later(
+        self, curriculum_id: int, snapshot: TeacherSnapshot, on_commit: Callback = None, on_abort: Callback = None
+    ) -> None:
+        """Replace the curriculum's snapshot with ``snapshot``; nobody waits for it."""
+        self._write_later(_snapshot_statements(curriculum_id, snapshot), on_commit=on_commit, on_abort=on_abort)
+
+    def _write_now(self, statements: _Statements) -> None:
         """Commit on the spot; only before ``start``, when there is no event loop to group on."""
         if self._loop is not None:
-            raise RuntimeError("Store.write_now after Store.start: use write")
+            raise RuntimeError("Store: a write on the spot after Store.start; writes now go through the event loop")
         self._db.execute("BEGIN IMMEDIATE")
         try:
             for sql, rows in statements:
@@ -430,15 +521,8 @@ class Store:
             raise
         self._db.execute("COMMIT")
 
-    def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """From now on, writes are grouped and committed on ``loop``."""
-        self._loop = loop
-
-    def write(
-        self,
-        statements: Statements,
-        on_commit: Callable[[], object] | None = None,
-        on_abort: Callable[[], object] | None = None,
+    def _write(
+        self, statements: _Statements, on_commit: Callback = None, on_abort: Callback = None
     ) -> asyncio.Future[None]:
         """Queue statements for one atomic write; call from the event loop.
 
@@ -447,19 +531,14 @@ class Store:
         awaiting, so bookkeeping never depends on the request surviving; what they return is ignored.
         """
         if self._loop is None:
-            raise RuntimeError("Store.write before Store.start")
+            raise RuntimeError("Store: a write before Store.start")
         future: asyncio.Future[None] = self._loop.create_future()
         self._queue(_Write(statements, future, on_commit, on_abort))
         return future
 
-    def write_later(
-        self,
-        statements: Statements,
-        on_commit: Callable[[], object] | None = None,
-        on_abort: Callable[[], object] | None = None,
-    ) -> None:
+    def _write_later(self, statements: _Statements, on_commit: Callback = None, on_abort: Callback = None) -> None:
         """Queue a write nobody waits for (telemetry, snapshots); a failure is logged. The
-        callbacks run as for ``write``."""
+        callbacks run as for ``_write``."""
         self._queue(_Write(statements, None, on_commit, on_abort))
 
     def close(self) -> None:

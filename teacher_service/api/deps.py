@@ -14,8 +14,9 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from common.schemas import CURRICULUM_NAME_PATTERN
 from teacher_service.core.config import Settings
-from teacher_service.curricula import Curriculum, CurriculumRegistry, UnknownCurriculum
+from teacher_service.curricula import Curriculum, UnknownCurriculum
 from teacher_service.metrics import ServiceMetrics
+from teacher_service.registry import CurriculumRegistry
 
 
 async def get_registry(request: Request) -> CurriculumRegistry:

@@ -1,0 +1,1 @@
+"""The service's configuration: settings read from defaults, ``KC_`` environment variables and flags."""

@@ -124,7 +124,7 @@ class AdrTeacher(Teacher):
                     tasks[row, d] = self.low[d] if side == "low" else self.high[d]
         return [self.space.from_array(row) for row in tasks]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         task = self.space.to_array(result.task)
         score = performance(result, self.params.reward_range)
         for d in range(len(self.space)):

@@ -383,7 +383,7 @@ class AlpGmmTeacher(Teacher):
         self._recent_origins.extend(origins)
         return [self.space.from_array(row) for row in tasks]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         features = self._to_features(self.space.to_array(result.task))
         reward = self._scaled(result.reward)
         distance, nearest_reward = self._history.nearest(features)

@@ -17,7 +17,7 @@ rebuilds the job of a fit that was due but never finished.
 
 Rebuilding a teacher from its results instead: create it with the same kind, space, seed and
 params (or restore a snapshot), then for each later stored result in order call ``skip(n)`` with
-the number of tasks handed out before it, followed by ``observe(result)``; finish with ``skip`` for
+the number of tasks handed out before it, followed by ``learn_and_fit(result)``; finish with ``skip`` for
 the tasks handed out since the last result. The next ``sample`` then returns what the live teacher
 would have returned, except that a live service may have sampled a few tasks before a due fit was
 installed, where the replay installs it at once.
@@ -75,9 +75,13 @@ class BuildJob:
 class Teacher(ABC):
     """Hands out tasks in a task space and learns from episode results.
 
-    Subclasses implement ``_draw`` (tasks for a run of sample indices), ``_learn`` (one validated
-    result) and ``_describe`` (their part of ``state``); this class keeps the counters and checks
-    the input, so every kind counts and rejects bad input the same way.
+    Subclasses implement ``_draw`` (tasks for a run of sample indices), ``_learn_validated`` (one
+    result whose task ``learn`` has checked) and ``_describe`` (their part of ``state``); this class
+    keeps the counters and checks the input, so every kind counts and rejects bad input the same way.
+
+    Learning comes in two forms: ``learn`` records a result and hands back the fit it made due, for
+    a service to run elsewhere and ``install`` later; ``learn_and_fit`` runs that fit on the spot
+    (tests, tools and offline replays).
     """
 
     kind: str
@@ -92,7 +96,9 @@ class Teacher(ABC):
         self.space = space
         self.seed = seed
         self.params = self.Params.parse(params)
-        self.tasks_sampled = 0
+        self.tasks_drawn = 0
+        """Tasks drawn so far, by ``sample`` and ``skip``: the index of the next task (reported and
+        stored as ``tasks_sampled``)."""
         self.results_seen = 0
 
     def sample(self, count: int) -> list[Task]:
@@ -102,8 +108,8 @@ class Teacher(ABC):
         ``i`` and the model installed at the time, never on how the draws were batched."""
         if isinstance(count, bool) or not isinstance(count, int) or count < 0:
             raise ValueError(f"count must be a non-negative integer, got {count!r}")
-        tasks = self._draw(self.tasks_sampled, count)
-        self.tasks_sampled += count
+        tasks = self._draw(self.tasks_drawn, count)
+        self.tasks_drawn += count
         return tasks
 
     def skip(self, count: int) -> None:
@@ -112,13 +118,13 @@ class Teacher(ABC):
         so per-task bookkeeping (such as ALP-GMM's origin tallies) matches the live run."""
         self.sample(count)
 
-    def update(self, result: EpisodeResult) -> FitJob | None:
-        """Record one result; return a fit job when a refit falls due, else ``None``.
+    def learn(self, result: EpisodeResult) -> FitJob | None:
+        """Learn from one result; return a fit job when a refit falls due, else ``None``.
 
         Raises ``ValueError`` when the result's task is not a valid task of this space."""
         task = self.space.validate(result.task)
         self.results_seen += 1
-        return self._learn(dataclasses.replace(result, task=task))
+        return self._learn_validated(dataclasses.replace(result, task=task))
 
     def install(self, fitted: Any) -> None:
         """Adopt the output of a ``FitJob.run()``. Teachers without models have no jobs."""
@@ -133,7 +139,7 @@ class Teacher(ABC):
         raise RuntimeError(f"{self.kind} teacher has no model to import")
 
     def refit_job(self, index: int) -> FitJob:
-        """The job ``update`` returned for fit ``index``, built again from the teacher's history
+        """The job ``learn`` returned for fit ``index``, built again from the teacher's history
         (for a fit that fell due before a snapshot and was lost with the process)."""
         raise RuntimeError(f"{self.kind} teacher has no fits")
 
@@ -150,7 +156,7 @@ class Teacher(ABC):
         """Everything but the history, as JSON-ready data; ``restore`` reads it back."""
         return {
             "kind": self.kind,
-            "tasks_sampled": self.tasks_sampled,
+            "tasks_sampled": self.tasks_drawn,
             "results_seen": self.results_seen,
             "state": self._export(),
         }
@@ -186,15 +192,15 @@ class Teacher(ABC):
         kind, space, seed and params."""
         if snapshot["kind"] != self.kind:
             raise ValueError(f"a {snapshot['kind']} snapshot cannot restore a {self.kind} teacher")
-        if self.tasks_sampled or self.results_seen:
+        if self.tasks_drawn or self.results_seen:
             raise RuntimeError("restore needs a fresh teacher")
         self._import(snapshot["state"], history)
-        self.tasks_sampled = int(snapshot["tasks_sampled"])
+        self.tasks_drawn = int(snapshot["tasks_sampled"])
         self.results_seen = int(snapshot["results_seen"])
 
-    def observe(self, result: EpisodeResult) -> None:
-        """Record a result and run any fit it triggers right here (for tests and replays)."""
-        job = self.update(result)
+    def learn_and_fit(self, result: EpisodeResult) -> None:
+        """Learn from a result and run any fit it makes due right here (for tests and tools)."""
+        job = self.learn(result)
         if job is not None:
             self.install(job.run())
 
@@ -204,7 +210,7 @@ class Teacher(ABC):
             "kind": self.kind,
             "seed": self.seed,
             "params": self.params.model_dump(),
-            "tasks_sampled": self.tasks_sampled,
+            "tasks_sampled": self.tasks_drawn,
             "results_seen": self.results_seen,
             **self._describe(),
         }
@@ -214,8 +220,8 @@ class Teacher(ABC):
         """Tasks number ``first_index`` to ``first_index + count - 1``."""
 
     @abstractmethod
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
-        """Learn from a result whose task has been validated."""
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
+        """The kind's own learning from a result whose task ``learn`` has validated and counted."""
 
     @abstractmethod
     def _describe(self) -> dict[str, Any]:

@@ -106,7 +106,7 @@ class CovarGmmTeacher(Teacher):
             tasks = np.where(from_gmm[:, None], self._to_task_units(features), tasks)
         return [self.space.from_array(row) for row in tasks]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         rate = self.params.fit_rate
         time = (self._log.size % rate) / rate
         self._log.append(np.concatenate([self._to_features(self.space.to_array(result.task)), (time, result.reward)]))

@@ -287,7 +287,7 @@ class CurrotTeacher(Teacher):
         units = np.clip(particles[picked] + self.params.noise * (2.0 * uniforms[:, 1:] - 1.0), 0.0, 1.0)
         return [self.space.from_array(row) for row in self.space.from_unit(units)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         success = UNKNOWN_SUCCESS if result.success is None else float(result.success)
         unit = self.space.to_unit(self.space.to_array(result.task))
         self._log.append(np.concatenate([unit, (result.reward, success)]))

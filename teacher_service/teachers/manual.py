@@ -191,7 +191,7 @@ class ManualTeacher(Teacher):
     def _draw(self, first_index: int, count: int) -> list[Task]:
         return [dict(self.current) for _ in range(count)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         if not self._is_current(result.task):
             self.stale_results += 1
             return None

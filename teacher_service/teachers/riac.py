@@ -23,7 +23,7 @@ progress difference alone (the reference multiplies it by the lengths of two two
 constant); new halves start with their own progress (the reference gives them the last attempt's);
 threshold draws per attempt are capped (``CANDIDATES_PER_ATTEMPT``) where the reference loops until
 one fits; the tree stops growing at ``max_regions``; every draw is addressed by the task's index.
-Splits run inline in ``update``: one costs about a millisecond with the defaults (measured on a
+Splits run inline in ``learn``: one costs about a millisecond with the defaults (measured on a
 busy two-core machine), no more than an HTTP request.
 
 When it helps: students whose competence grows region by region; TeachMyAgent found RIAC best on
@@ -177,7 +177,7 @@ class RiacTeacher(Teacher):
                     features[row] = region.low + features[row] * (region.high - region.low)
         return [self.space.from_array(row) for row in self.space.from_unit(features)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         if self._size == len(self._data):
             grown = np.empty((2 * len(self._data), self._dims + 1))
             grown[: self._size] = self._data[: self._size]

@@ -334,7 +334,7 @@ class SelfPacedTeacher(Teacher):
         unit = np.clip(self.gaussian.mean + np.exp(self.gaussian.log_std) * normals, 0.0, 1.0)
         return [self.space.from_array(row) for row in self.space.from_unit(unit)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         self.points.append(self.space.to_unit(self.space.to_array(result.task)))
         self.scores.append(performance(result, self.params.reward_range))
         if len(self.scores) == self.params.update_every:

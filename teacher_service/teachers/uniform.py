@@ -31,7 +31,7 @@ class RandomTeacher(Teacher):
         unit = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, len(self.space))
         return [self.space.from_array(row) for row in self.space.from_unit(unit)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         return None
 
     def _describe(self) -> dict[str, Any]:
@@ -63,7 +63,7 @@ class FixedTeacher(Teacher):
     def _draw(self, first_index: int, count: int) -> list[Task]:
         return [dict(self.point) for _ in range(count)]
 
-    def _learn(self, result: EpisodeResult) -> FitJob | None:
+    def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         return None
 
     def _describe(self) -> dict[str, Any]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from teacher_service.curricula import _rerun
+from teacher_service.replay import _rerun
 from teacher_service.store import StoredFit
 from teacher_service.teachers import FitJob
 
@@ -14,7 +14,7 @@ def _never_run() -> None:
 def test_a_fit_that_failed_live_fails_again_on_replay_without_running() -> None:
     recorded = StoredFit(
         index=3,
-        tasks_sampled=40,
+        tasks_drawn=40,
         results_seen=32,
         started_at=10.0,
         finished_at=11.5,
@@ -26,6 +26,6 @@ def test_a_fit_that_failed_live_fails_again_on_replay_without_running() -> None:
 
 
 def test_a_fit_that_succeeded_live_runs_again_with_its_live_timing() -> None:
-    recorded = StoredFit(index=0, tasks_sampled=16, results_seen=16, started_at=1.0, finished_at=2.0, error=None)
+    recorded = StoredFit(index=0, tasks_drawn=16, results_seen=16, started_at=1.0, finished_at=2.0, error=None)
     outcome = _rerun(FitJob(index=0, run=lambda: "model"), recorded)
     assert (outcome.output, outcome.error, outcome.started_at, outcome.finished_at) == ("model", None, 1.0, 2.0)

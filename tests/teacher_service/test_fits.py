@@ -156,7 +156,7 @@ def _results(teacher: AlpGmmTeacher, count: int) -> list[FitJob]:
     """Feed ``count`` results whose reward rises along x0; return the fits that fell due."""
     jobs = []
     for task in teacher.sample(count):
-        fit = teacher.update(EpisodeResult(task, task["x0"] * teacher.results_seen / 100))
+        fit = teacher.learn(EpisodeResult(task, task["x0"] * teacher.results_seen / 100))
         if fit is not None:
             jobs.append(fit)
     return jobs

@@ -43,7 +43,7 @@ def _drive(api: httpx.Client, kind: str, reference: Teacher) -> None:
         for task in tasks:
             success = _succeeds(task["params"], episode)
             results.append({"task_id": task["task_id"], "reward": float(success), "success": success})
-            reference.observe(EpisodeResult(task["params"], float(success), success))
+            reference.learn_and_fit(EpisodeResult(task["params"], float(success), success))
             episode += 1
         assert api.post(f"/curricula/{kind}/results", json={"results": results}).json()["accepted"] == len(tasks)
 

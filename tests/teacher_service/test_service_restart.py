@@ -60,7 +60,7 @@ class Mirror:
         ]
         assert self.api.post(f"/curricula/{NAME}/results", json={"results": results}).json()["accepted"] == len(tasks)
         for task, result in zip(tasks, results, strict=True):
-            job = self.reference.update(EpisodeResult(task["params"], result["reward"], None, 50))
+            job = self.reference.learn(EpisodeResult(task["params"], result["reward"], None, 50))
             if job is not None:
                 self.due.append(job)
         self.reported += results

@@ -91,7 +91,7 @@ class Mirror:
 
     def learn(self, task: dict[str, float], reward: float) -> None:
         """What the reference does for a result the service accepted."""
-        if (job := self.reference.update(EpisodeResult(task, reward))) is not None:
+        if (job := self.reference.learn(EpisodeResult(task, reward))) is not None:
             self.due.append(job)
         self.steps.append(("result", EpisodeResult(task, reward)))
 
@@ -121,7 +121,7 @@ class Mirror:
             if step == "draw":
                 teacher.sample(value)
             elif step == "result":
-                if (job := teacher.update(value)) is not None:
+                if (job := teacher.learn(value)) is not None:
                     jobs[job.index] = job
             elif value not in left_out:
                 teacher.install(jobs[value].run())
@@ -307,7 +307,7 @@ def _version_1_database(path: Path, name: str, teacher: Teacher, batches: int) -
         connection.execute("INSERT INTO curricula VALUES (1, ?, ?, 1.0)", (name, json.dumps(spec)))
         reported = 0
         for batch in range(batches + 1):
-            first = teacher.tasks_sampled
+            first = teacher.tasks_drawn
             tasks = teacher.sample(8 if batch < batches else 3)
             connection.executemany(
                 "INSERT INTO tasks VALUES (1, ?, ?, ?, ?)",
@@ -324,11 +324,11 @@ def _version_1_database(path: Path, name: str, teacher: Teacher, batches: int) -
                     (first + i, reward, 2.5 + batch),
                 )
                 reported += 1
-                if (job := teacher.update(EpisodeResult(task, reward, None, 50))) is not None:
+                if (job := teacher.learn(EpisodeResult(task, reward, None, 50))) is not None:
                     teacher.install(job.run())
                     connection.execute(
                         "INSERT INTO fits VALUES (1, ?, ?, ?, ?, ?, NULL)",
-                        (job.index, teacher.tasks_sampled, teacher.results_seen, 3.0 + job.index, 3.5 + job.index),
+                        (job.index, teacher.tasks_drawn, teacher.results_seen, 3.0 + job.index, 3.5 + job.index),
                     )
 
 

@@ -19,6 +19,7 @@ from common.schemas import (
     TaskRequest,
 )
 from teacher_service.api.deps import CurriculumDep, CurriculumName, RegistryDep, WriteAccess
+from teacher_service.api.responses import curriculum_info, curriculum_state
 from teacher_service.curricula import CurriculumConflict, InvalidResults
 from teacher_service.curriculum_spec import CurriculumRequest
 
@@ -47,7 +48,7 @@ _WRITE: dict[int | str, dict[str, Any]] = {
 
 @router.get("")
 async def list_curricula(registry: RegistryDep) -> CurriculumList:
-    return CurriculumList(curricula=[curriculum.info() for curriculum in registry])
+    return CurriculumList(curricula=[curriculum_info(curriculum) for curriculum in registry])
 
 
 @router.put(
@@ -76,12 +77,12 @@ async def put_curriculum(
         ) from None
     if not created:
         response.status_code = status.HTTP_200_OK
-    return curriculum.info()
+    return curriculum_info(curriculum)
 
 
 @router.get("/{name}", responses=_NOT_FOUND)
 async def get_curriculum(curriculum: CurriculumDep) -> CurriculumInfo:
-    return curriculum.info()
+    return curriculum_info(curriculum)
 
 
 @router.post("/{name}/tasks", dependencies=[WriteAccess], responses={**_NOT_FOUND, **_WRITE})
@@ -106,4 +107,4 @@ async def get_state(
     recent: Annotated[int | None, Query(ge=0, description="Recent results to include; all kept by default.")] = None,
 ) -> CurriculumState:
     """The teacher's own state, recent fits, and recent results with their tasks."""
-    return curriculum.state(len(curriculum.recent_results) if recent is None else recent)
+    return curriculum_state(curriculum, len(curriculum.recent_results) if recent is None else recent)

@@ -32,4 +32,4 @@ class ReachStudent:
 def practise(teacher: Teacher, student: ReachStudent, episodes: int) -> None:
     for _ in range(episodes):
         task = teacher.sample(1)[0]
-        teacher.observe(EpisodeResult(task, reward=0.0, success=student.attempt(task)))
+        teacher.learn_and_fit(EpisodeResult(task, reward=0.0, success=student.attempt(task)))

@@ -19,6 +19,6 @@ def run_student(teacher: Teacher, episodes: int, batch: int = 1) -> list[Task]:
     handed_out: list[Task] = []
     while len(handed_out) < episodes:
         for task in teacher.sample(min(batch, episodes - len(handed_out))):
-            teacher.observe(EpisodeResult(task, scripted_reward(task, len(handed_out))))
+            teacher.learn_and_fit(EpisodeResult(task, scripted_reward(task, len(handed_out))))
             handed_out.append(task)
     return handed_out

@@ -84,7 +84,7 @@ def test_never_narrows_past_the_start() -> None:
 def test_between_the_thresholds_a_full_queue_is_dropped_without_a_move() -> None:
     teacher = adr(reward_range=[0.0, 10.0])
     for _ in range(12):
-        teacher.observe(EpisodeResult(teacher.sample(1)[0], reward=5.0))
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=5.0))
     state = teacher.state()
     assert state["moves"] == [] and box(teacher) == ([0.0, -2.0], [0.0, -2.0])
     assert {entry["queued"] for entry in state["bounds"]["boundaries"]} == {2}, "12 results: two queues emptied"
@@ -93,11 +93,11 @@ def test_between_the_thresholds_a_full_queue_is_dropped_without_a_move() -> None
 def test_returns_count_through_the_reward_range_and_success_wins_over_the_return() -> None:
     scaled = adr(reward_range=[0.0, 10.0])
     for _ in range(5):
-        scaled.observe(EpisodeResult(scaled.sample(1)[0], reward=8.0))
+        scaled.learn_and_fit(EpisodeResult(scaled.sample(1)[0], reward=8.0))
     assert scaled.state()["widened"] == 2, "8 of [0, 10] is 0.8, at the upper threshold"
     failed = adr(reward_range=[0.0, 10.0])
     for _ in range(5):
-        failed.observe(EpisodeResult(failed.sample(1)[0], reward=10.0, success=False))
+        failed.learn_and_fit(EpisodeResult(failed.sample(1)[0], reward=10.0, success=False))
     assert failed.state()["widened"] == 0
 
 

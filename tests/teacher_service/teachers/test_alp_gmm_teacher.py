@@ -30,7 +30,7 @@ def alp_gmm(space: TaskSpace = SKEWED, seed: int = 0, **params: Any) -> AlpGmmTe
 
 def feed(teacher: AlpGmmTeacher, history: list[tuple[dict[str, float], float]]) -> None:
     for task, reward in history:
-        teacher.observe(EpisodeResult(task, reward))
+        teacher.learn_and_fit(EpisodeResult(task, reward))
 
 
 def two_component_fit(alps: tuple[float, float], means: list[list[float]], variance: float) -> MixtureFit:
@@ -47,7 +47,7 @@ def test_first_fit_rate_tasks_are_uniform_and_the_first_fit_comes_due_after_them
     teacher = alp_gmm(KUKA_TASK_SPACE, fit_rate=30, max_components=3)
     jobs = []
     for _ in range(30):
-        jobs.append(teacher.update(EpisodeResult(teacher.sample(1)[0], 0.0)))
+        jobs.append(teacher.learn(EpisodeResult(teacher.sample(1)[0], 0.0)))
     assert jobs[:-1] == [None] * 29 and jobs[-1] is not None
     assert teacher.state()["task_origins"] == {"gmm": 0, "uniform": 30}
 
@@ -75,7 +75,7 @@ def test_a_bootstrap_spread_keeps_bootstrap_tasks_near_the_easiest_until_the_fir
 
     job = None
     for task in bootstrap:
-        job = teacher.update(EpisodeResult(task, 0.0)) or job
+        job = teacher.learn(EpisodeResult(task, 0.0)) or job
     teacher.install(job.run())
     teacher.sample(1000)
     origins = teacher.state()["task_origins"]
@@ -99,7 +99,7 @@ def test_a_target_task_ratio_sends_that_share_of_tasks_to_the_hardest_task_from_
 
     job = None
     for task in bootstrap:
-        job = teacher.update(EpisodeResult(task, float(task == hardest))) or job
+        job = teacher.learn(EpisodeResult(task, float(task == hardest))) or job
     teacher.install(job.run())
     later = teacher.sample(2000)
     origins = teacher.state()["task_origins"]
@@ -133,7 +133,7 @@ def test_refits_fall_due_every_fit_rate_results_and_a_failed_one_is_passed_over(
     due_at, jobs = [], []
     rng = np.random.default_rng(0)
     for result in range(1, 71):
-        job = teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random())))
+        job = teacher.learn(EpisodeResult(teacher.sample(1)[0], float(rng.random())))
         if job is not None:
             due_at.append(result)
             jobs.append(job)
@@ -152,7 +152,7 @@ def test_refits_fall_due_every_fit_rate_results_and_a_failed_one_is_passed_over(
 def test_each_fit_sees_the_last_fit_rate_points() -> None:
     teacher = alp_gmm(fit_rate=20, max_components=2)
     tasks = [{"wide": float(i), "narrow": -0.5} for i in range(40)]
-    jobs = [teacher.update(EpisodeResult(task, 0.0)) for task in tasks]
+    jobs = [teacher.learn(EpisodeResult(task, 0.0)) for task in tasks]
     points = jobs[-1].run.args[1]
     assert points.shape == (20, 3)
     assert points[:, 0] == pytest.approx(np.arange(20, 40) / 100)
@@ -173,7 +173,7 @@ def test_the_same_seed_and_history_give_the_same_fits() -> None:
     def fits(seed: int) -> list[MixtureFit]:
         teacher = alp_gmm(seed=seed, fit_rate=40, max_components=4)
         rng = np.random.default_rng(1)
-        jobs = [teacher.update(EpisodeResult(task, float(rng.random()))) for task in teacher.sample(80)]
+        jobs = [teacher.learn(EpisodeResult(task, float(rng.random()))) for task in teacher.sample(80)]
         return [job.run() for job in jobs if job is not None]
 
     for fit, again in zip(fits(3), fits(3), strict=True):
@@ -253,7 +253,7 @@ def test_gmm_tasks_go_where_reward_changes() -> None:
         task = teacher.sample(1)[0]
         in_corner = task["rnd_obj_x"] < 0.3 and task["jp2"] > 1.0
         practice += in_corner
-        teacher.observe(EpisodeResult(task, min(practice / 100, 1.0) if in_corner else 0.0))
+        teacher.learn_and_fit(EpisodeResult(task, min(practice / 100, 1.0) if in_corner else 0.0))
     teacher.sample(1000)
     components = teacher.state()["components"]
     best = max(components, key=lambda component: component["mean_alp"])
@@ -264,7 +264,7 @@ def test_gmm_tasks_go_where_reward_changes() -> None:
 def test_a_stored_fit_installs_bit_for_bit() -> None:
     teacher = alp_gmm(fit_rate=30, max_components=3)
     rng = np.random.default_rng(2)
-    jobs = [teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random()))) for _ in range(30)]
+    jobs = [teacher.learn(EpisodeResult(teacher.sample(1)[0], float(rng.random()))) for _ in range(30)]
     fitted = jobs[-1].run()
     restored = teacher.import_fit(json.loads(json.dumps(teacher.export_fit(fitted))))
     for name in ("weights", "means", "covariances"):
@@ -277,7 +277,7 @@ def test_a_stored_fit_installs_bit_for_bit() -> None:
 def test_a_fit_lost_before_it_was_installed_is_rebuilt_from_the_history() -> None:
     teacher = alp_gmm(fit_rate=25, max_components=3)
     rng = np.random.default_rng(4)
-    due = [job for _ in range(60) if (job := teacher.update(EpisodeResult(teacher.sample(1)[0], float(rng.random()))))]
+    due = [job for _ in range(60) if (job := teacher.learn(EpisodeResult(teacher.sample(1)[0], float(rng.random()))))]
     assert [job.index for job in due] == [0, 1]
     for job in due:
         again = teacher.refit_job(job.index)
@@ -293,7 +293,7 @@ def repeated_hardest_task_run(teacher: AlpGmmTeacher, results: int, adopt: bool)
     rewards = np.random.default_rng(8).random(results)
     alps = []
     for reward in rewards:
-        teacher.observe(EpisodeResult(teacher.sample(1)[0], float(reward)))
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], float(reward)))
         alps.append(float(teacher.recent_alps[-1]))
         if adopt and (job := teacher.build_job()) is not None:
             teacher.adopt_build(job, job.run())
@@ -359,5 +359,5 @@ def test_a_repeated_task_sits_in_the_tree_once_and_is_compared_with_its_first_re
     tree = job.run()
     assert tree.tree.n == 41, "40 distinct tasks and the repeated one once"
     assert teacher.history(0)[:, -1].sum() == 39
-    teacher.observe(EpisodeResult(same, 100.0))
+    teacher.learn_and_fit(EpisodeResult(same, 100.0))
     assert teacher.recent_alps[-1] == 100.0 - 1.0, "the repeated task's first result had reward 1"

@@ -31,7 +31,7 @@ def learning_on_the_left(task: dict[str, float], episode: int) -> float:
 
 def test_the_first_fit_comes_due_after_fit_rate_results_over_task_time_and_reward() -> None:
     teacher = covar_gmm(fit_rate=20, max_components=3)
-    jobs = [teacher.update(EpisodeResult(task, float(i))) for i, task in enumerate(teacher.sample(20))]
+    jobs = [teacher.learn(EpisodeResult(task, float(i))) for i, task in enumerate(teacher.sample(20))]
     assert jobs[:-1] == [None] * 19 and jobs[-1] is not None
     rows = teacher.history(0)
     assert rows.shape == (20, 4)
@@ -46,7 +46,7 @@ def test_the_first_fit_comes_due_after_fit_rate_results_over_task_time_and_rewar
     with pytest.raises(ValueError, match="stale"):
         teacher.install(fit)
     for i, task in enumerate(teacher.sample(20)):
-        teacher.update(EpisodeResult(task, float(i)))
+        teacher.learn(EpisodeResult(task, float(i)))
     np.testing.assert_array_equal(teacher.history(20)[:, 2], np.arange(20) / 20, "time restarts with each batch")
 
 
@@ -86,7 +86,7 @@ def test_sampling_concentrates_where_reward_is_changing() -> None:
     teacher = covar_gmm(seed=5)
     for episode in range(1000):
         task = teacher.sample(1)[0]
-        teacher.observe(EpisodeResult(task, learning_on_the_left(task, episode)))
+        teacher.learn_and_fit(EpisodeResult(task, learning_on_the_left(task, episode)))
     assert teacher.state()["fits"] == 4
     xs = np.array([task["x"] for task in teacher.sample(3000)])
     # Uniform sampling puts 30% of tasks on the strip; the random share alone puts 20% * 30% there.
@@ -109,7 +109,7 @@ def test_a_fit_exports_exactly_and_a_lost_fit_is_rebuilt() -> None:
     teacher = covar_gmm(fit_rate=30, max_components=4)
     jobs = []
     for episode, task in enumerate(teacher.sample(90)):
-        job = teacher.update(EpisodeResult(task, learning_on_the_left(task, episode)))
+        job = teacher.learn(EpisodeResult(task, learning_on_the_left(task, episode)))
         if job is not None:
             jobs.append(job)
     fit = jobs[1].run()

@@ -75,7 +75,7 @@ def test_particles_move_toward_the_target_at_most_max_move_and_never_out_of_the_
     reasons = np.zeros(3, dtype=np.int64)
     for _ in range(4000):
         task = teacher.sample(1)[0]
-        job = teacher.update(EpisodeResult(task, student.practise(task)))
+        job = teacher.learn(EpisodeResult(task, student.practise(task)))
         if job is None:
             continue
         before = particles(teacher)
@@ -116,7 +116,7 @@ def test_before_any_result_reaches_the_bar_particles_head_for_the_better_half() 
         job
         for task in teacher.sample(SMALL["update_every"])
         # always below the bar of 5, better toward a = 1
-        if (job := teacher.update(EpisodeResult(task, task["a"] - 2.0))) is not None
+        if (job := teacher.learn(EpisodeResult(task, task["a"] - 2.0))) is not None
     ]
     before = particles(teacher)
     fitted = job.run()
@@ -128,9 +128,7 @@ def test_before_any_result_reaches_the_bar_particles_head_for_the_better_half() 
 
 def test_a_flat_window_below_the_bar_leaves_the_particles_where_they_are() -> None:
     teacher = currot()
-    (job,) = [
-        job for task in teacher.sample(SMALL["update_every"]) if (job := teacher.update(EpisodeResult(task, 0.0)))
-    ]
+    (job,) = [job for task in teacher.sample(SMALL["update_every"]) if (job := teacher.learn(EpisodeResult(task, 0.0)))]
     before = particles(teacher)
     fitted = job.run()
     assert np.all(fitted.why == STAYING) and fitted.particles.tobytes() == before.tobytes()
@@ -142,7 +140,7 @@ def test_the_estimate_uses_success_when_every_result_reports_it() -> None:
         for teacher in (flagged, mixed):
             task = teacher.sample(1)[0]
             success = None if teacher is mixed and step == 3 else step % 2 == 0
-            teacher.observe(EpisodeResult(task, 7.0, success=success))
+            teacher.learn_and_fit(EpisodeResult(task, 7.0, success=success))
     assert (flagged.state()["measure"], flagged.state()["bar"]) == ("success", 0.5)
     assert (mixed.state()["measure"], mixed.state()["bar"]) == ("return", 5.0)
 
@@ -167,7 +165,7 @@ def due_jobs(teacher: CurrotTeacher, results: int, seed: int) -> list[Any]:
     jobs = []
     for _ in range(results):
         task = teacher.sample(1)[0]
-        job = teacher.update(EpisodeResult(task, float(10 * task["a"] * rng.random())))
+        job = teacher.learn(EpisodeResult(task, float(10 * task["a"] * rng.random())))
         if job is not None:
             jobs.append(job)
     return jobs

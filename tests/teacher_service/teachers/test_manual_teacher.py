@@ -31,7 +31,7 @@ def manual(**params: Any) -> Teacher:
 
 def report(teacher: Teacher, rewards: list[float], task: dict[str, float] | None = None) -> None:
     for reward in rewards:
-        teacher.observe(EpisodeResult(task or teacher.sample(1)[0], reward))
+        teacher.learn_and_fit(EpisodeResult(task or teacher.sample(1)[0], reward))
 
 
 def test_lessons_from_easiest_to_hardest_follow_the_book_step_by_step() -> None:
@@ -175,13 +175,13 @@ def test_the_success_rate_can_decide_and_results_without_it_are_left_out() -> No
         {"metric": "success", "threshold": 0.7, "step_back_below": 0.3, "window": 4, "min_episodes": 4},
     )
     for success in (True, None, True, False):
-        teacher.observe(EpisodeResult(teacher.sample(1)[0], 100.0, success=success))
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], 100.0, success=success))
     assert teacher.state()["lesson"] == 0, "three scored episodes are below min_episodes"
     assert teacher.state()["unscored_results"] == 1
-    teacher.observe(EpisodeResult(teacher.sample(1)[0], -100.0, success=True))
+    teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], -100.0, success=True))
     assert teacher.state()["lesson"] == 1, "success rate (1 + 1 + 0 + 1) / 4 = 0.75 > 0.7 whatever the reward"
     for _ in range(4):
-        teacher.observe(EpisodeResult(teacher.sample(1)[0], 100.0, success=False))
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], 100.0, success=False))
     assert teacher.state()["lesson"] == 0
     assert teacher.state()["moves"][-1]["why"] == "success rate 0 over 4 episodes < 0.3"
 

@@ -37,7 +37,7 @@ def test_progress_compares_the_older_and_newer_half_of_the_window() -> None:
 def test_a_full_leaf_splits_into_two_populated_halves_of_the_box() -> None:
     teacher = riac(max_region_size=20, min_region_results=3)
     for episode, task in enumerate(teacher.sample(21)):
-        teacher.observe(EpisodeResult(task, learning_on_the_left(task, 100 * episode)))
+        teacher.learn_and_fit(EpisodeResult(task, learning_on_the_left(task, 100 * episode)))
     state = teacher.state()
     assert state["splits"] == 1 and state["discards"] == 0
     root, lower, upper = state["regions"]
@@ -51,7 +51,7 @@ def test_a_full_leaf_splits_into_two_populated_halves_of_the_box() -> None:
     assert sum(region["sampling_probability"] for region in state["regions"]) == pytest.approx(1.0)
 
     task = {"x": 0.01, "y": -1.99}
-    teacher.observe(EpisodeResult(task, 0.0))
+    teacher.learn_and_fit(EpisodeResult(task, 0.0))
     assert teacher.state()["regions"][0]["results"] == 21, "a region keeps max_region_size + 1 results"
     assert lower["results"] + 1 == teacher.state()["regions"][1]["results"], "a result joins each region holding it"
 
@@ -59,7 +59,7 @@ def test_a_full_leaf_splits_into_two_populated_halves_of_the_box() -> None:
 def test_a_leaf_with_no_qualifying_cut_drops_its_oldest_results() -> None:
     teacher = riac(max_region_size=20, discard_ratio=0.25)
     for episode in range(21):
-        teacher.observe(EpisodeResult({"x": 0.5, "y": 0.0}, float(episode)))
+        teacher.learn_and_fit(EpisodeResult({"x": 0.5, "y": 0.0}, float(episode)))
     state = teacher.state()
     assert state["splits"] == 0 and state["discards"] == 1
     assert state["regions"][0]["results"] == 21 - 5
@@ -68,7 +68,7 @@ def test_a_leaf_with_no_qualifying_cut_drops_its_oldest_results() -> None:
 def test_the_tree_stops_growing_at_max_regions() -> None:
     teacher = riac(max_region_size=10, max_regions=5)
     for episode, task in enumerate(teacher.sample(400)):
-        teacher.observe(EpisodeResult(task, learning_on_the_left(task, 5 * episode)))
+        teacher.learn_and_fit(EpisodeResult(task, learning_on_the_left(task, 5 * episode)))
     state = teacher.state()
     assert state["splits"] == 2 and len(state["regions"]) == 5 and state["discards"] > 0
 
@@ -78,7 +78,7 @@ def test_mutations_move_the_lowest_reward_task_of_a_region() -> None:
     teacher.sample(1)
     for episode in range(10):
         x = 0.1 * episode
-        teacher.observe(EpisodeResult({"x": x, "y": 0.0}, 1.0 if episode != 4 else 0.0))
+        teacher.learn_and_fit(EpisodeResult({"x": x, "y": 0.0}, 1.0 if episode != 4 else 0.0))
     tasks = teacher.sample(1000)
     xs = np.array([task["x"] for task in tasks])
     ys = np.array([task["y"] for task in tasks])
@@ -91,7 +91,7 @@ def test_sampling_concentrates_where_reward_is_changing() -> None:
     teacher = riac(seed=5)
     for episode in range(3000):
         task = teacher.sample(1)[0]
-        teacher.observe(EpisodeResult(task, learning_on_the_left(task, episode)))
+        teacher.learn_and_fit(EpisodeResult(task, learning_on_the_left(task, episode)))
     state = teacher.state()
     assert state["splits"] >= 5
     xs = np.array([task["x"] for task in teacher.sample(3000)])
@@ -105,7 +105,7 @@ def test_sampling_concentrates_where_reward_is_changing() -> None:
 def test_regions_are_picked_by_progress_among_all_regions_or_leaves(leaves_only: bool) -> None:
     teacher = riac(max_region_size=20, leaves_only=leaves_only)
     for episode, task in enumerate(teacher.sample(200)):
-        teacher.observe(EpisodeResult(task, learning_on_the_left(task, 10 * episode)))
+        teacher.learn_and_fit(EpisodeResult(task, learning_on_the_left(task, 10 * episode)))
     regions = teacher.state()["regions"]
     picked = [region for region in regions if region["sampling_probability"] > 0]
     assert picked and all(region["progress"] > 0 for region in picked)
@@ -119,7 +119,9 @@ def test_a_restored_teacher_rebuilds_regions_that_split_and_discarded() -> None:
     teacher = riac(max_region_size=10, max_regions=7)
     for episode, task in enumerate(teacher.sample(300)):
         stuck = episode % 3 == 0  # a third of the results pile up on one point, which no cut can separate
-        teacher.observe(EpisodeResult({"x": 0.9, "y": 1.9} if stuck else task, learning_on_the_left(task, episode)))
+        teacher.learn_and_fit(
+            EpisodeResult({"x": 0.9, "y": 1.9} if stuck else task, learning_on_the_left(task, episode))
+        )
     state = teacher.state()
     assert state["splits"] == 3 and state["discards"] > 0
 

@@ -69,7 +69,7 @@ def test_holds_a_stuck_student_near_the_bar_and_never_steps_toward_the_target_be
     for _ in range(2000):
         task = teacher.sample(1)[0]
         successes.append(student.attempt(task))
-        teacher.observe(EpisodeResult(task, reward=0.0, success=successes[-1]))
+        teacher.learn_and_fit(EpisodeResult(task, reward=0.0, success=successes[-1]))
     state = teacher.state()
     assert state["kl_to_target"] > 100, "far from the target (a student that keeps up arrives: see above)"
     assert np.mean(successes[-1000:]) >= 0.2, "the student keeps succeeding about as often as the bar asks"
@@ -128,7 +128,7 @@ def test_the_bar_is_on_the_scaled_return_without_success() -> None:
     below, above = spdl(reward_range=[0.0, 10.0]), spdl(reward_range=[0.0, 10.0])
     for teacher, reward in ((below, 2.0), (above, 3.0)):
         for _ in range(50):
-            teacher.observe(EpisodeResult(teacher.sample(1)[0], reward=reward))
+            teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=reward))
     assert below.state()["moves"][0]["why"].startswith("below the bar")
     assert above.state()["moves"][0]["why"] == "toward the target"
 

@@ -89,14 +89,14 @@ def test_replaying_the_history_rebuilds_the_teacher(kind: str) -> None:
     for step in range(90):
         tasks = live.sample(1 + step % 3)
         result = EpisodeResult(tasks[0], reward=float(step % 7) / 3 - 1)
-        live.observe(result)
+        live.learn_and_fit(result)
         history.append((len(tasks), result))
     live.sample(4)
 
     rebuilt = build(kind)
     for handed_out, result in history:
         rebuilt.skip(handed_out)
-        rebuilt.observe(result)
+        rebuilt.learn_and_fit(result)
     rebuilt.skip(4)
 
     assert rebuilt.state() == live.state()
@@ -217,12 +217,12 @@ def test_bad_input_is_rejected_without_changing_the_teacher(kind: str) -> None:
     teacher = build(kind)
     outside = {**KUKA_TASK_SPACE.hardest(), "rnd_obj_x": 1.5}
     with pytest.raises(ValueError, match="rnd_obj_x"):
-        teacher.update(EpisodeResult(outside, 1.0))
+        teacher.learn(EpisodeResult(outside, 1.0))
     with pytest.raises(ValueError, match="count must be a non-negative integer"):
         teacher.sample(-1)
     with pytest.raises(ValueError, match="reward must be finite"):
         EpisodeResult(KUKA_TASK_SPACE.hardest(), float("inf"))
-    assert teacher.results_seen == 0 and teacher.tasks_sampled == 0
+    assert teacher.results_seen == 0 and teacher.tasks_drawn == 0
 
 
 def test_fixed_teacher_defaults_to_the_hardest_point_and_needs_one() -> None:

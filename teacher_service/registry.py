@@ -1,0 +1,122 @@
+"""A service's curricula: creating and finding them, rebuilding them at start-up (``replay``), and
+starting and stopping the background work (group commits, fits, builds) they share."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+
+from teacher_service.core.config import Settings
+from teacher_service.curricula import FIT_HISTORY, Curriculum, CurriculumConflict, UnknownCurriculum
+from teacher_service.curriculum_spec import TypedSpec, stored_spec
+from teacher_service.fits import FitRunner
+from teacher_service.metrics import ServiceMetrics
+from teacher_service.replay import replay
+from teacher_service.store import Store, StoredCurriculum
+
+log = logging.getLogger(__name__)
+
+
+class CurriculumRegistry:
+    """Every curriculum of one service, loaded from and written to one store."""
+
+    def __init__(self, store: Store, metrics: ServiceMetrics, settings: Settings) -> None:
+        self._store = store
+        self._metrics = metrics
+        self._settings = settings
+        self._fits = FitRunner(settings.fit_processes, settings.fit_timeout_s, metrics)
+        self._builds = ThreadPoolExecutor(max_workers=1, thread_name_prefix="teacher-builds")
+        self._curricula: dict[str, Curriculum] = {}
+
+    def restore(self) -> None:
+        """Rebuild every stored curriculum; call before ``start``."""
+        for stored in self._store.curricula():
+            started = time.perf_counter()
+            curriculum = self._build(stored)
+            curriculum.adopt_replay(
+                replay(
+                    self._store,
+                    curriculum.id,
+                    curriculum.name,
+                    curriculum.teacher,
+                    task_window=self._settings.task_window,
+                    fit_history=FIT_HISTORY,
+                    recent_results=self._settings.recent_results,
+                )
+            )
+            self._curricula[stored.name] = curriculum
+            log.info(
+                "restored curriculum %r in %.2f s: %d tasks, %d results, %d fits",
+                stored.name,
+                time.perf_counter() - started,
+                curriculum.tasks_issued,
+                curriculum.results_received,
+                curriculum.fits_completed,
+            )
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Start writing and fitting on ``loop``, the running loop."""
+        self._store.start(loop)
+        self._fits.start(loop)
+        for curriculum in self._curricula.values():
+            curriculum.resume()
+
+    def close(self) -> None:
+        self._fits.close()
+        self._store.close()
+        self._builds.shutdown(wait=False, cancel_futures=True)
+
+    @property
+    def fits_stopped(self) -> str | None:
+        """Why no fits run any more, if the fit processes kept dying."""
+        return self._fits.stopped
+
+    def __len__(self) -> int:
+        return len(self._curricula)
+
+    def __iter__(self) -> Iterator[Curriculum]:
+        return iter(list(self._curricula.values()))
+
+    def get(self, name: str) -> Curriculum:
+        try:
+            return self._curricula[name]
+        except KeyError:
+            raise UnknownCurriculum(name) from None
+
+    async def create(self, name: str, spec: TypedSpec) -> tuple[Curriculum, bool]:
+        """Create a curriculum, or return the identical one that exists (``created`` False).
+
+        Raises ``CurriculumConflict`` when the name holds a different one, ``ValueError`` when the
+        teacher rejects its parameters."""
+        existing = self._curricula.get(name)
+        if existing is not None:
+            if existing.spec != spec:
+                raise CurriculumConflict(
+                    f"curriculum {name!r} already exists with a different configuration "
+                    f"(teacher {existing.spec.teacher!r}, seed {existing.spec.seed}); choose another name"
+                )
+            return existing, False
+        curriculum_id = max((c.id for c in self._curricula.values()), default=0) + 1
+        stored = StoredCurriculum(curriculum_id, name, spec.model_dump_json(), time.time())
+        curriculum = self._build(stored)
+        # Registered before the write so a concurrent PUT sees it; the store's FIFO order puts this
+        # row before any task written for it.
+        self._curricula[name] = curriculum
+        await self._store.add_curriculum(stored, on_abort=lambda: self._curricula.pop(name, None))
+        return curriculum, True
+
+    def _build(self, stored: StoredCurriculum) -> Curriculum:
+        return Curriculum(
+            stored.id,
+            stored.name,
+            stored_spec(stored.spec),
+            stored.created_at,
+            self._store,
+            self._fits,
+            self._builds,
+            self._metrics,
+            self._settings,
+        )
