@@ -441,21 +441,10 @@ class AlpGmmTeacher(Teacher):
         """Components picked by their mean ALP (the last coordinate), clipped at 0."""
         return MixtureSampler.prepare(fit, np.clip(fit.means[:, -1], 0.0, None), len(self.space))
 
-    @property
-    def history_size(self) -> int:
-        return self._history.size
-
-    def history(self, start: int) -> np.ndarray:
+    def _history_rows(self) -> RowLog:
         """One row per result: its task features, its (scaled) reward, its ALP, and 1.0 when an
         earlier result had the same task features (else 0.0)."""
-        return self._history.log.copy(start)
-
-    @property
-    def history_held(self) -> int:
-        return self._history.log.held
-
-    def release_history(self, before: int) -> None:
-        self._history.log.release(before)
+        return self._history.log
 
     def _export(self) -> dict[str, Any]:
         return {

@@ -36,6 +36,7 @@ import numpy as np
 
 from common.task_space import Task, TaskSpace
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.row_log import RowLog
 
 
 @dataclass(frozen=True)
@@ -161,24 +162,35 @@ class Teacher(ABC):
             "state": self._export(),
         }
 
+    def _history_rows(self) -> RowLog | None:
+        """The append-only history, for kinds that keep one: one float64 row per result, which
+        never changes once written, so a store can append the rows in chunks."""
+        return None
+
     @property
     def history_size(self) -> int:
         """Rows in the append-only history (see ``history``)."""
-        return 0
+        rows = self._history_rows()
+        return 0 if rows is None else rows.size
 
     def history(self, start: int) -> np.ndarray:
-        """History rows ``start`` onwards, float64, shape (rows, width); rows never change once
-        written, so a store can append them in chunks."""
-        return np.empty((0, 0))
+        """History rows ``start`` onwards, shape (rows, width); what a row holds is the kind's own
+        (see its ``_history_rows``)."""
+        rows = self._history_rows()
+        return np.empty((0, 0)) if rows is None else rows.copy(start)
 
     @property
     def history_held(self) -> int:
         """History rows still in memory (the rest were released and are no longer read)."""
-        return self.history_size
+        rows = self._history_rows()
+        return 0 if rows is None else rows.held
 
-    def release_history(self, before: int) -> None:  # noqa: B027 (a hook: most kinds keep no history)
+    def release_history(self, before: int) -> None:
         """History rows before ``before`` are stored and will not be asked for again: a teacher
         drops those its algorithm no longer reads, so its memory stays bounded."""
+        rows = self._history_rows()
+        if rows is not None:
+            rows.release(before)
 
     @staticmethod
     def history_kept_from(snapshot: Mapping[str, Any]) -> int:

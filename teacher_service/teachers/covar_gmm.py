@@ -158,20 +158,9 @@ class CovarGmmTeacher(Teacher):
         progress = np.abs(covariances) if self.params.absolute_progress else np.clip(covariances, 0.0, None)
         return MixtureSampler.prepare(fit, progress, len(self.space))
 
-    @property
-    def history_size(self) -> int:
-        return self._log.size
-
-    def history(self, start: int) -> np.ndarray:
+    def _history_rows(self) -> RowLog:
         """One row per result: its task features, its time in its batch and its reward."""
-        return self._log.copy(start)
-
-    @property
-    def history_held(self) -> int:
-        return self._log.held
-
-    def release_history(self, before: int) -> None:
-        self._log.release(before)
+        return self._log
 
     def _export(self) -> dict[str, Any]:
         return {

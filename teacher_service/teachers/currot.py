@@ -382,21 +382,10 @@ class CurrotTeacher(Teacher):
             )
         return ParticleFit(int(data["index"]), particles, values, why, str(data["measure"]), float(data["bar"]))
 
-    @property
-    def history_size(self) -> int:
-        return self._log.size
-
-    def history(self, start: int) -> np.ndarray:
+    def _history_rows(self) -> RowLog:
         """One row per result: its task in unit coordinates, its reward and its success (1, 0, or
         -1 when not reported)."""
-        return self._log.copy(start)
-
-    @property
-    def history_held(self) -> int:
-        return self._log.held
-
-    def release_history(self, before: int) -> None:
-        self._log.release(before)
+        return self._log
 
     def _export(self) -> dict[str, Any]:
         return {
