@@ -44,6 +44,7 @@ from common.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.row_log import RowLog
 
 SPLIT_STREAM = 2
 """The random stream that split searches draw their cuts from (``draws`` has tasks and fits)."""
@@ -121,15 +122,17 @@ def progress(rewards: np.ndarray, window: int) -> float:
 
 @dataclass
 class _Region:
-    """A box in unit task coordinates, and its latest results as history row indices, oldest first.
+    """A box in unit task coordinates, and its latest results, oldest first: their history row
+    indices and their values (unit task, reward), so the history itself need not stay in memory.
 
     It holds the last ``max_region_size + 1`` results inside it whose index is at least ``cutoff``,
-    so ``cutoff`` and the history are enough to rebuild it."""
+    so ``cutoff`` and the history from its oldest result on are enough to rebuild it."""
 
     low: np.ndarray
     high: np.ndarray
     cutoff: int
     rows: np.ndarray
+    values: np.ndarray
     progress: float = 0.0
     cut: tuple[int, float, int, int] | None = None
     """For a split region: (dimension, threshold, lower half's id, upper half's id)."""
@@ -145,8 +148,7 @@ class RiacTeacher(Teacher):
     def __init__(self, space: TaskSpace, seed: int, params: RiacParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         self._dims = len(space)
-        self._data = np.empty((1024, self._dims + 1))
-        self._size = 0
+        self._log = RowLog(self._dims + 1, 1024)
         self._regions = [self._root()]
         self.split_searches = 0
         self.splits = 0
@@ -156,7 +158,8 @@ class RiacTeacher(Teacher):
         self._refresh_choice()
 
     def _root(self) -> _Region:
-        return _Region(np.zeros(self._dims), np.ones(self._dims), 0, np.empty(0, dtype=np.intp))
+        empty = np.empty((0, self._dims + 1))
+        return _Region(np.zeros(self._dims), np.ones(self._dims), 0, np.empty(0, dtype=np.intp), empty)
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         dims = self._dims
@@ -170,23 +173,19 @@ class RiacTeacher(Teacher):
             if random_below <= mode or mode < mutate_below:
                 region = self._regions[self._choices[pick]]
                 if mode < mutate_below and len(region.rows):
-                    worst = region.rows[np.argmin(self._data[region.rows, -1])]
-                    moved = self._data[worst, :dims] + self.params.mutation_std * standard_normals(features[row])
+                    worst = region.values[np.argmin(region.values[:, -1]), :dims]
+                    moved = worst + self.params.mutation_std * standard_normals(features[row])
                     features[row] = np.clip(moved, region.low + MUTATION_MARGIN, region.high - MUTATION_MARGIN)
                 else:
                     features[row] = region.low + features[row] * (region.high - region.low)
         return [self.space.from_array(row) for row in self.space.from_unit(features)]
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
-        if self._size == len(self._data):
-            grown = np.empty((2 * len(self._data), self._dims + 1))
-            grown[: self._size] = self._data[: self._size]
-            self._data = grown
         features = self.space.to_unit(self.space.to_array(result.task))
-        row = self._size
-        self._data[row, :-1] = features
-        self._data[row, -1] = result.reward
-        self._size += 1
+        values = np.append(features, result.reward)
+        row = self._log.size
+        self._log.append(values)
+        self._log.needed_from = self._log.size  # the regions hold what they read
         path = [0]
         while (cut := self._regions[path[-1]].cut) is not None:
             dim, threshold, lower, upper = cut
@@ -195,11 +194,12 @@ class RiacTeacher(Teacher):
         for region_id in path:
             region = self._regions[region_id]
             region.rows = np.append(region.rows, row)[-capacity:]
+            region.values = np.concatenate([region.values, values[None]])[-capacity:]
         if len(self._regions[path[-1]].rows) > self.params.max_region_size:
             self._split_or_discard(path[-1])
         for region_id in path:
             region = self._regions[region_id]
-            region.progress = progress(self._data[region.rows, -1], self.params.window)
+            region.progress = progress(region.values[:, -1], self.params.window)
         self._refresh_choice()
         return None
 
@@ -208,21 +208,18 @@ class RiacTeacher(Teacher):
         cut = self._best_cut(region) if len(self._regions) + 2 <= self.params.max_regions else None
         if cut is None:
             drop = max(1, int(self.params.max_region_size * self.params.discard_ratio))
-            region.rows = region.rows[drop:]
+            region.rows, region.values = region.rows[drop:], region.values[drop:]
             region.cutoff = int(region.rows[0])
             self.discards += 1
             return
         dim, threshold = cut
         lower_high, upper_low = region.high.copy(), region.low.copy()
         lower_high[dim] = upper_low[dim] = threshold
-        below = self._data[region.rows, dim] < threshold
+        below = region.values[:, dim] < threshold
         lower_id, upper_id = len(self._regions), len(self._regions) + 1
-        for low, high, rows in (
-            (region.low, lower_high, region.rows[below]),
-            (upper_low, region.high, region.rows[~below]),
-        ):
-            half = _Region(low.copy(), high, int(region.rows[0]), rows)
-            half.progress = progress(self._data[rows, -1], self.params.window)
+        for low, high, side in ((region.low, lower_high, below), (upper_low, region.high, ~below)):
+            half = _Region(low.copy(), high, int(region.rows[0]), region.rows[side], region.values[side])
+            half.progress = progress(half.values[:, -1], self.params.window)
             self._regions.append(half)
         region.cut = (dim, threshold, lower_id, upper_id)
         self.splits += 1
@@ -235,8 +232,8 @@ class RiacTeacher(Teacher):
         candidates = attempts * CANDIDATES_PER_ATTEMPT
         dims = generator.integers(self._dims, size=candidates)
         thresholds = region.low[dims] + generator.random(candidates) * (region.high - region.low)[dims]
-        points = self._data[region.rows, :-1]
-        rewards = self._data[region.rows, -1]
+        points = region.values[:, :-1]
+        rewards = region.values[:, -1]
         below = points[:, dims] < thresholds
         counts = below.sum(axis=0)
         least = self.params.min_results
@@ -266,18 +263,18 @@ class RiacTeacher(Teacher):
         self._choices = np.array(choices, dtype=np.intp)
         self._choice_cdf = np.cumsum(probabilities)
 
-    @property
-    def history_size(self) -> int:
-        return self._size
-
-    def history(self, start: int) -> np.ndarray:
+    def _history_rows(self) -> RowLog:
         """One row per result: its task in unit coordinates and its reward."""
-        rows: np.ndarray = self._data[start : self._size].copy()
-        return rows
+        return self._log
+
+    def _oldest_held(self) -> int:
+        """The oldest history row any region holds: a restore reads the history from there."""
+        return min((int(region.rows[0]) for region in self._regions if len(region.rows)), default=self._log.size)
 
     def _export(self) -> dict[str, Any]:
         return {
-            "history_rows": self._size,
+            "history_rows": self._log.size,
+            "history_from": self._oldest_held(),
             "split_searches": self.split_searches,
             "splits": self.splits,
             "discards": self.discards,
@@ -285,13 +282,8 @@ class RiacTeacher(Teacher):
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        if len(history) != state["history_rows"]:
-            raise ValueError(f"the snapshot has {state['history_rows']} history rows, got {len(history)}")
-        if len(history) and (history.ndim != 2 or history.shape[1] != self._dims + 1):
-            raise ValueError(f"history rows must have {self._dims + 1} columns, got shape {history.shape}")
-        self._data = np.empty((max(2 * len(history), 1024), self._dims + 1))
-        self._data[: len(history)] = history
-        self._size = len(history)
+        first = int(state.get("history_from", 0))
+        self._log.load(history, first, int(state["history_rows"]))
         self.split_searches = int(state["split_searches"])
         self.splits = int(state["splits"])
         self.discards = int(state["discards"])
@@ -313,28 +305,32 @@ class RiacTeacher(Teacher):
                 region.cut = (dim, threshold, lower, upper)
                 lower_high, upper_low = region.high.copy(), region.low.copy()
                 lower_high[dim] = upper_low[dim] = threshold
-                regions[lower] = _Region(region.low.copy(), lower_high, 0, region.rows)
-                regions[upper] = _Region(upper_low, region.high.copy(), 0, region.rows)
+                regions[lower] = _Region(region.low.copy(), lower_high, 0, region.rows, region.values)
+                regions[upper] = _Region(upper_low, region.high.copy(), 0, region.rows, region.values)
         self._regions = [region for region in regions if region is not None]
         if len(self._regions) != len(entries):
             raise ValueError("some regions of the snapshot are halves of no region")
-        self._refill()
+        self._refill(first)
+        self._log.needed_from = self._log.size
         self._refresh_choice()
 
-    def _refill(self) -> None:
-        """Give each region its rows from the history: partition all rows down the tree, then keep
-        each region's last ``max_region_size + 1`` at or after its cutoff."""
+    def _refill(self, first: int) -> None:
+        """Give each region its rows from the history: partition the rows from ``first`` (the
+        oldest any region held) down the tree, then keep each region's last
+        ``max_region_size + 1`` at or after its cutoff."""
         capacity = self.params.max_region_size + 1
-        pending = [(0, np.arange(self._size, dtype=np.intp))]
+        history = self._log.view(first)
+        pending = [(0, np.arange(first, self._log.size, dtype=np.intp))]
         while pending:
             region_id, rows = pending.pop()
             region = self._regions[region_id]
             if region.cut is not None:
                 dim, threshold, lower, upper = region.cut
-                below = self._data[rows, dim] < threshold
+                below = history[rows - first, dim] < threshold
                 pending += [(lower, rows[below]), (upper, rows[~below])]
             region.rows = rows[rows >= region.cutoff][-capacity:]
-            region.progress = progress(self._data[region.rows, -1], self.params.window)
+            region.values = history[region.rows - first]
+            region.progress = progress(region.values[:, -1], self.params.window)
 
     def _describe(self) -> dict[str, Any]:
         chance = np.zeros(len(self._regions))

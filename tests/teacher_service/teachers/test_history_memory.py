@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import numpy as np
 import pytest
 from scripted_student import run_student
 
@@ -19,6 +20,7 @@ BOUNDED: dict[str, tuple[dict[str, Any], int, int]] = {
     # kind: (params, results fed, most rows the teacher may hold)
     "alp-gmm": ({"fit_rate": 1000, "max_components": 3, "history_window": 10_000}, 50_000, 2 * (10_000 + 3_000)),
     "covar-gmm": ({"fit_rate": 1000, "max_components": 3}, 40_000, 2 * (10_000 + 2_000)),
+    "riac": ({"max_region_size": 30, "max_regions": 40}, 20_000, 2 * 2 * RELEASE_EVERY),
     "currot": (
         {"particles": 20, "update_every": 50, "buffer_size": 100, "candidates": 4, "delta": 0.0},
         8_000,
@@ -27,17 +29,22 @@ BOUNDED: dict[str, tuple[dict[str, Any], int, int]] = {
 }
 
 
-def feed_and_release(teacher: Teacher, results: int) -> None:
+def feed_and_store(teacher: Teacher, results: int) -> np.ndarray:
+    """Feed results; every RELEASE_EVERY, write the new history rows to a stand-in store and
+    release them, as the service does with each snapshot. Returns the stored rows."""
+    stored: list[np.ndarray] = []
     for _ in range(results // RELEASE_EVERY):
         run_student(teacher, RELEASE_EVERY, batch=10)
+        stored.append(teacher.history(sum(len(rows) for rows in stored)))
         teacher.release_history(teacher.history_size)
+    return np.concatenate(stored)
 
 
 @pytest.mark.parametrize("kind", sorted(BOUNDED))
 def test_released_history_leaves_memory_and_a_restore_from_the_tail_is_the_same_teacher(kind: str) -> None:
     params, results, most_held = BOUNDED[kind]
     original = make_teacher(kind, KUKA_TASK_SPACE, 5, params)
-    feed_and_release(original, results)
+    stored = feed_and_store(original, results)
     assert original.history_size == results
     assert original.history_held <= most_held, f"{original.history_held} of {results} rows still held"
 
@@ -45,7 +52,7 @@ def test_released_history_leaves_memory_and_a_restore_from_the_tail_is_the_same_
     kept_from = Teacher.history_kept_from(snapshot)
     assert kept_from > 0, "a restore needs only the tail"
     restored = make_teacher(kind, KUKA_TASK_SPACE, 5, params)
-    restored.restore(snapshot, original.history(kept_from))
+    restored.restore(snapshot, stored[kept_from:])
     assert restored.state() == original.state()
     assert run_student(restored, 1_500, batch=7) == run_student(original, 1_500, batch=7)
     assert restored.sample(20) == original.sample(20)

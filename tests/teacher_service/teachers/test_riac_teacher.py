@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from common.task_space import Parameter, TaskSpace
-from teacher_service.teachers import EpisodeResult, make_teacher
+from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 from teacher_service.teachers.riac import RiacTeacher, progress
 
 SQUARE = TaskSpace([Parameter("x", 0.0, 1.0), Parameter("y", -2.0, 2.0)])
@@ -126,6 +126,9 @@ def test_a_restored_teacher_rebuilds_regions_that_split_and_discarded() -> None:
     assert state["splits"] == 3 and state["discards"] > 0
 
     restored = riac(max_region_size=10, max_regions=7)
-    restored.restore(json.loads(json.dumps(teacher.snapshot())), teacher.history(0))
+    snapshot = json.loads(json.dumps(teacher.snapshot()))
+    kept_from = Teacher.history_kept_from(snapshot)
+    assert 0 < kept_from < 300, "the regions hold only recent rows"
+    restored.restore(snapshot, teacher.history(kept_from))
     assert restored.state() == state
     assert restored.sample(200) == teacher.sample(200)
