@@ -33,9 +33,12 @@ from teacher_service.process import ServiceProcess  # noqa: E402
 from teacher_service.teachers import TEACHER_KINDS  # noqa: E402
 
 KINDS = tuple(TEACHER_KINDS)
-SOAK_PARAMS: dict[str, dict[str, object]] = {"alp-gmm": {"fit_rate": 250, "history_window": 10_000}}
-"""ALP-GMM with its smallest nearest-task window, so that its curricula reach it (and their memory
-its bound) within minutes; every other kind with its defaults."""
+SOAK_PARAMS: dict[str, dict[str, object]] = {
+    "alp-gmm": {"fit_rate": 250, "history_window": 10_000},
+    "riac": {"max_regions": 100},
+}
+"""ALP-GMM with its smallest nearest-task window and RIAC with few regions, so that their curricula
+reach their memory bounds within minutes; every other kind with its defaults."""
 ABANDON_SHARE = 0.05
 """Share of drawn tasks whose episode is 'lost' and never reported."""
 MOVE_EVERY_S = 30.0
