@@ -32,11 +32,11 @@ from ray.rllib.utils.metrics import (
 )
 from ray.tune.registry import register_env
 
-from common import ENV_ID
-from common.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
-from common.schemas import TeacherKind
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import TeacherClient
+from common.client.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
+from common.client.schemas import TeacherKind
+from common.client.teacher_client import TeacherClient
+from common.kuka import ENV_ID
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
 from learner.config import KUKA_TEACHER_PARAMS
 
