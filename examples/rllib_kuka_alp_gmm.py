@@ -67,7 +67,10 @@ def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRe
 
 
 def make_env(config: dict[str, Any]) -> gymnasium.Env:
-    """Called by RLlib in each env runner with the ``env_config`` below."""
+    """Called by RLlib in each env runner with the ``env_config`` below. Ray sends this function by
+    value, so an env runner has not imported ``common.kuka``, which registers the KUKA ids: import it."""
+    import common.kuka  # noqa: F401
+
     kuka = gymnasium.make(ENV_ID, max_steps=config["max_episode_steps"])
     register = registration(config["teacher"], config["teacher_params"])
     return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=register)
