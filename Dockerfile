@@ -50,6 +50,7 @@ RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.tom
     && find /opt/venv/lib -depth -type d -name tests -path '*/site-packages/*' -exec rm -rf {} +
 
 COPY README.md ./
+COPY kuka_curriculum.py ./
 COPY common ./common
 COPY teacher_service ./teacher_service
 COPY rollout_worker ./rollout_worker

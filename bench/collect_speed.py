@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import ray
 
-from common.kuka_env import KukaGraspEnv
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import TeacherClient
+from common.client.teacher_client import TeacherClient
+from common.kuka.env import KukaGraspEnv
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.cli import curriculum_name
 from learner.config import PPOConfig, TrainConfig
 from learner.teacher_process import local_teacher_service

@@ -36,7 +36,7 @@ import numpy as np
 from gymnasium.utils.seeding import np_random
 from matplotlib.figure import Figure
 
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
 from learner.config import TrainConfig
 from learner.metrics import METRICS_FILE

@@ -31,9 +31,9 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
-from common import ENV_ID
-from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.task_space import KUKA_TASK_SPACE
+from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.kuka import ENV_ID
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess
 
 CURRICULUM = "wrapper-overhead"

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.kuka_env import KukaGraspEnv
+from common.kuka.env import KukaGraspEnv
 
 
 @dataclass

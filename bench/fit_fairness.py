@@ -23,7 +23,8 @@ import time
 
 from threadpoolctl import threadpool_limits
 
-from common.task_space import KUKA_TASK_SPACE, Task
+from common.client.task_space import Task
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.fits import FitOutcome, FitRunner
 from teacher_service.metrics import ServiceMetrics
 from teacher_service.teachers import EpisodeResult, FitJob, make_teacher

@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from common import ENV_IDS, HARD_ENV_ID
-from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, Task, task_space_for
+from common.client.task_space import Task
+from common.kuka import ENV_IDS, HARD_ENV_ID
+from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
 from learner.stats import wilson_interval
 
 POLICIES = ("zero", "random", "scripted")

@@ -32,8 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.schemas import API_PREFIX, ParameterSpec  # noqa: E402
-from common.task_space import KUKA_TASK_SPACE  # noqa: E402
+from common.client.schemas import API_PREFIX, ParameterSpec  # noqa: E402
+from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
 
 CURRICULUM = "load"
 TARGET_ROUND_TRIPS = 1000.0
@@ -202,7 +202,7 @@ def main() -> int:
             [
                 sys.executable,
                 "-m",
-                "common.cli",
+                "kuka_curriculum",
                 "serve",
                 "--port",
                 str(port),

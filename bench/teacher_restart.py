@@ -35,8 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.schemas import API_PREFIX, ParameterSpec, ResultItem  # noqa: E402
-from common.task_space import KUKA_TASK_SPACE  # noqa: E402
+from common.client.schemas import API_PREFIX, ParameterSpec, ResultItem  # noqa: E402
+from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
 from teacher_service.core.config import Settings  # noqa: E402
 from teacher_service.curriculum_spec import AlpGmmCurriculum  # noqa: E402
 from teacher_service.metrics import ServiceMetrics  # noqa: E402

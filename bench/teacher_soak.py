@@ -27,8 +27,8 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.schemas import ParameterSpec  # noqa: E402
-from common.task_space import KUKA_TASK_SPACE  # noqa: E402
+from common.client.schemas import ParameterSpec  # noqa: E402
+from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
 from teacher_service.process import ServiceProcess  # noqa: E402
 from teacher_service.teachers import TEACHER_KINDS  # noqa: E402
 

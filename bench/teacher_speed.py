@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 from threadpoolctl import threadpool_limits
 
-from common.task_space import Parameter, Task, TaskSpace
+from common.client.task_space import Parameter, Task, TaskSpace
 from teacher_service.teachers import EpisodeResult, FitJob, make_teacher
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 

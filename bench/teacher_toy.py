@@ -68,7 +68,7 @@ from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
-from common.schemas import API_PREFIX
+from common.client.schemas import API_PREFIX
 from teacher_service.process import ServiceProcess
 from teacher_service.teachers import TEACHER_KINDS
 

@@ -33,8 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common.kuka_env import KukaGraspEnv
-from common.task_space import KUKA_TASK_SPACE, Task
+from common.client.task_space import Task
+from common.kuka.env import KukaGraspEnv
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.config import LOOPS, TrainConfig
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.store import Store
@@ -109,7 +110,7 @@ class TrainRun:
 
 def timed_train(loop: str, workers: int, total_steps: int, seed: int, scratch: Path, raw_seconds: float) -> TrainRun:
     run_dir = scratch / f"train-{loop}"
-    command = [sys.executable, "-m", "common.cli", "train", "--loop", loop, "--workers", str(workers),
+    command = [sys.executable, "-m", "kuka_curriculum", "train", "--loop", loop, "--workers", str(workers),
                "--total-steps", str(total_steps), "--seed", str(seed), "--run-dir", str(run_dir)]  # fmt: skip
     started = time.perf_counter()
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)

@@ -1,20 +1,6 @@
-"""Shared parts of kuka-curriculum: the KUKA grasp environments, their task spaces and what the
-services exchange.
+"""What the services share, in rooms by who uses them; importing ``common`` itself loads nothing.
 
-Importing ``common`` registers ``KukaGrasp-v0`` (the book's task) and ``KukaGraspHard-v0`` (a harder
-family around it) with gymnasium by entry-point string, so pybullet loads only when an environment
-is made.
+``common.client`` is what any trainer needs to take its tasks from a teacher service (the API schemas
+the service shares too), ``common.kuka`` the KUKA grasp environments, and ``common.policy`` what the
+rollout workers and the learner exchange.
 """
-
-import gymnasium
-
-ENV_ID = "KukaGrasp-v0"
-HARD_ENV_ID = "KukaGraspHard-v0"
-ENV_IDS = (ENV_ID, HARD_ENV_ID)
-
-for _env_id, _entry_point in (
-    (ENV_ID, "common.kuka_env:KukaGraspEnv"),
-    (HARD_ENV_ID, "common.kuka_env:KukaGraspHardEnv"),
-):
-    if _env_id not in gymnasium.registry:
-        gymnasium.register(id=_env_id, entry_point=_entry_point)

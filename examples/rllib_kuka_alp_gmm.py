@@ -32,11 +32,11 @@ from ray.rllib.utils.metrics import (
 )
 from ray.tune.registry import register_env
 
-from common import ENV_ID
-from common.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
-from common.schemas import TeacherKind
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import TeacherClient
+from common.client.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
+from common.client.schemas import TeacherKind
+from common.client.teacher_client import TeacherClient
+from common.kuka import ENV_ID
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
 from learner.config import KUKA_TEACHER_PARAMS
 
@@ -67,7 +67,10 @@ def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRe
 
 
 def make_env(config: dict[str, Any]) -> gymnasium.Env:
-    """Called by RLlib in each env runner with the ``env_config`` below."""
+    """Called by RLlib in each env runner with the ``env_config`` below. Ray sends this function by
+    value, so an env runner has not imported ``common.kuka``, which registers the KUKA ids: import it."""
+    import common.kuka  # noqa: F401
+
     kuka = gymnasium.make(ENV_ID, max_steps=config["max_episode_steps"])
     register = registration(config["teacher"], config["teacher_params"])
     return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=register)

@@ -27,11 +27,11 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
-from common import ENV_ID
-from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.schemas import TeacherKind
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import TeacherClient
+from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.client.schemas import TeacherKind
+from common.client.teacher_client import TeacherClient
+from common.kuka import ENV_ID
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
 from learner.config import KUKA_TEACHER_PARAMS
 

@@ -27,10 +27,10 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.schemas import TeacherKind
-from common.task_space import Parameter, Task, TaskSpace
-from common.teacher_client import TeacherClient
+from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.client.schemas import TeacherKind
+from common.client.task_space import Parameter, Task, TaskSpace
+from common.client.teacher_client import TeacherClient
 from learner.arguments import add_teacher_flags
 
 PENDULUM_TASK_SPACE = TaskSpace(

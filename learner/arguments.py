@@ -7,7 +7,7 @@ import json
 from collections.abc import Callable
 from typing import Any, get_args
 
-from common.schemas import TeacherKind
+from common.client.schemas import TeacherKind
 
 
 class UsageError(Exception):

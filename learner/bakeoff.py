@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common import ENV_IDS
+from common.kuka import ENV_IDS
 from learner.arguments import UsageError, add_override_flags, int_at_least, positive_int
 from learner.bakeoff_report import LEARNING_CURVES, RESULTS_JSON, RESULTS_MARKDOWN, write_reports
 from learner.bakeoff_runs import (

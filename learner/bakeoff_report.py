@@ -11,9 +11,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from common import ENV_ID
-from common.schemas import TeacherKind
-from common.task_space import task_space_for
+from common.client.schemas import TeacherKind
+from common.kuka import ENV_ID
+from common.kuka.task_space import task_space_for
 from learner.bakeoff_runs import learning_curve
 from learner.bakeoff_statistics import CURVE_WINDOW, SUCCESS_TARGET, TeacherResult, median_steps
 from learner.config import TrainConfig

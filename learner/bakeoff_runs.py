@@ -23,8 +23,8 @@ from typing import Any
 
 from tqdm import tqdm
 
-from common import ENV_ID
-from common.task_space import task_space_for
+from common.kuka import ENV_ID
+from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
@@ -116,7 +116,7 @@ def train_command(
     command = [
         sys.executable,
         "-m",
-        "common.cli",
+        "kuka_curriculum",
         "train",
         "--teacher",
         run.teacher,

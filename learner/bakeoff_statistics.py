@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from common import ENV_ID
+from common.kuka import ENV_ID
 from learner.bakeoff_runs import Run, learning_curve
 from learner.checkpoint_evaluation import EvaluationResult
 from learner.stats import Interval, mean_interval, wilson_interval

@@ -7,7 +7,8 @@ from __future__ import annotations
 import pickle
 from pathlib import Path
 
-from common.task_space import KUKA_TASK_SPACE, Task, TaskSpace, task_space_for
+from common.client.task_space import Task, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
 from learner.arguments import UsageError
 from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 

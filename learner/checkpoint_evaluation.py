@@ -21,11 +21,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from common import ENV_ID
-from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.policy import InferencePolicy, PolicySnapshot
-from common.task_space import KUKA_TASK_SPACE, Task, TaskSpace, task_space_for
-from common.trajectory import EpisodeStats
+from common.client.task_space import Task, TaskSpace
+from common.kuka import ENV_ID
+from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
+from common.policy.actor_critic import InferencePolicy, PolicySnapshot
+from common.policy.trajectory import EpisodeStats
 from learner.checkpoint import Checkpoint
 from learner.kuka_policy import policy_snapshot
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval

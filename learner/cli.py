@@ -21,8 +21,8 @@ from typing import Any
 
 from pydantic import SecretStr
 
-from common import ENV_IDS
-from common.write_token import TOKEN_VARIABLE, token_problem
+from common.client.write_token import TOKEN_VARIABLE, token_problem
+from common.kuka import ENV_IDS
 from learner.arguments import add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
@@ -229,8 +229,8 @@ def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str
 
 
 def _register_curriculum(url: str, name: str, config: TrainConfig, token: SecretStr | None) -> None:
-    from common.task_space import task_space_for
-    from common.teacher_client import TeacherClient, TeacherClientError
+    from common.client.teacher_client import TeacherClient, TeacherClientError
+    from common.kuka.task_space import task_space_for
 
     with TeacherClient(url, name, token=token) as client:
         try:

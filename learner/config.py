@@ -11,10 +11,10 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from common import ENV_ID, ENV_IDS
+from common.kuka import ENV_ID, ENV_IDS
 
 if TYPE_CHECKING:
-    from common.schemas import TeacherKind
+    from common.client.schemas import TeacherKind
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@ a checkpoint holds."""
 
 from __future__ import annotations
 
-from common.kuka_env import KukaGraspEnv
-from common.policy import PolicySnapshot, PolicySpec
+from common.kuka.env import KukaGraspEnv
+from common.policy.actor_critic import PolicySnapshot, PolicySpec
 from learner.checkpoint import Checkpoint
 from learner.config import PPOConfig
 from learner.ppo import PPOLearner

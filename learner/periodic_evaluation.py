@@ -10,8 +10,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from common.task_space import Task, task_space_for
-from common.trajectory import EpisodeStats
+from common.client.task_space import Task
+from common.kuka.task_space import task_space_for
+from common.policy.trajectory import EpisodeStats
 
 EVALUATION_SEED_OFFSET = 10_000
 """Evaluation seeds are EVALUATION_SEED_OFFSET + 0, 1, 2, ..."""

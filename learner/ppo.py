@@ -13,9 +13,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from common.normalizer import NormalizerState, RunningNormalizer
-from common.policy import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec
-from common.trajectory import TrajectoryBatch
+from common.policy.actor_critic import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.normalizer import NormalizerState, RunningNormalizer
+from common.policy.trajectory import TrajectoryBatch
 from learner.config import PPOConfig
 
 

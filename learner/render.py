@@ -19,10 +19,10 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
-from common import ENV_ID
-from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.policy import InferencePolicy, PolicySnapshot
-from common.task_space import Task
+from common.client.task_space import Task
+from common.kuka import ENV_ID
+from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from learner.arguments import UsageError, positive_int
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
 from learner.kuka_policy import policy_snapshot

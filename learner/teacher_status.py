@@ -11,7 +11,7 @@ import threading
 import time
 from types import TracebackType
 
-from common.teacher_client import TeacherClient, TeacherRequestError, TeacherUnavailable
+from common.client.teacher_client import TeacherClient, TeacherRequestError, TeacherUnavailable
 
 POLL_INTERVAL_S = 5.0
 STATUS_TIMEOUT_S = 2.0

@@ -31,8 +31,8 @@ import ray
 import torch
 from pydantic import SecretStr
 
-from common.policy import PolicySnapshot
-from common.trajectory import EpisodeStats, TrajectoryBatch
+from common.policy.actor_critic import PolicySnapshot
+from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from learner.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.config import TrainConfig
 from learner.kuka_policy import kuka_policy_spec

@@ -14,12 +14,12 @@ import ray
 import torch
 from pydantic import SecretStr
 
-from common import ENV_ID
-from common.kuka_env import KukaGraspEnv, make_kuka_env
-from common.policy import InferencePolicy, PolicySnapshot
-from common.task_space import Task
-from common.teacher_client import Assignment, TeacherClient
-from common.trajectory import EpisodeStats, TrajectoryBatch
+from common.client.task_space import Task
+from common.client.teacher_client import Assignment, TeacherClient
+from common.kuka import ENV_ID
+from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.policy.actor_critic import InferencePolicy, PolicySnapshot
+from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.sampler import Sampler, run_episodes
 
 TASK_TIMEOUT_S = 2.0
@@ -39,7 +39,7 @@ class WorkerSettings:
     teacher_token: SecretStr | None = None
     """Held as a ``SecretStr`` so that no repr or log line of the settings shows it."""
     env_id: str = ENV_ID
-    """The registered environment the workers step (``common.ENV_IDS``)."""
+    """The registered environment the workers step (``common.kuka.ENV_IDS``)."""
 
 
 class _TeacherTasks:

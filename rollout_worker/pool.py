@@ -17,9 +17,9 @@ import numpy as np
 import ray
 from ray.exceptions import RayActorError
 
-from common.policy import PolicySnapshot
-from common.task_space import Task
-from common.trajectory import EpisodeStats, TrajectoryBatch
+from common.client.task_space import Task
+from common.policy.actor_critic import PolicySnapshot
+from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.actor import RolloutWorker, WorkerSettings
 
 MAX_CONSECUTIVE_DEATHS = 3

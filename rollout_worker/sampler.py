@@ -12,9 +12,9 @@ from typing import Any, Protocol, cast
 import gymnasium as gym
 import numpy as np
 
-from common.policy import InferencePolicy
-from common.task_space import Task
-from common.trajectory import EpisodeStats, TrajectoryBatch
+from common.client.task_space import Task
+from common.policy.actor_critic import InferencePolicy
+from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 
 
 class TaskSource(Protocol):

@@ -32,8 +32,8 @@ from collections import deque
 from concurrent.futures import Executor
 from typing import Any
 
-from common.schemas import FitEvent, IssuedTask, RecentResult, ResultAck, ResultItem
-from common.task_space import Task
+from common.client.schemas import FitEvent, IssuedTask, RecentResult, ResultAck, ResultItem
+from common.client.task_space import Task
 from teacher_service.core.config import Settings
 from teacher_service.curriculum_spec import TypedSpec
 from teacher_service.fits import FitOutcome, FitRunner

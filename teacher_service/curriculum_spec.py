@@ -1,6 +1,6 @@
 """The service's curriculum spec: the teacher kind chooses the model its ``params`` must match.
 
-``common.schemas.CurriculumSpec`` is what a client sends and reads back, with ``params`` as a plain
+``common.client.schemas.CurriculumSpec`` is what a client sends and reads back, with ``params`` as a plain
 mapping; here each kind has its own spec class, joined into one union discriminated by ``teacher``,
 so a bad parameter is a 422 naming the field and ``/docs`` shows every kind's parameters.
 """
@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal, get_args
 
 from pydantic import Field, TypeAdapter, ValidationError
 
-from common.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
+from common.client.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TeacherParams
 from teacher_service.teachers.adr import AdrParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams

@@ -26,7 +26,6 @@ why. It stays stopped until the service restarts; teachers keep sampling from th
 from __future__ import annotations
 
 import asyncio
-import importlib
 import logging
 import multiprocessing
 import os
@@ -55,10 +54,6 @@ MAX_DEATHS_IN_A_ROW = 3
 """Fit processes that may die with no fit finishing in between before the runner stops."""
 
 _LIVENESS_POLL_S = 0.5
-
-FIT_LIBRARIES = ("sklearn.mixture",)
-"""Imported by each fit process before it says it is ready, so that no fit's time limit pays for
-them; the service itself imports them only if it ever fits in place (a version-1 database)."""
 
 
 @dataclass(frozen=True)
@@ -94,8 +89,10 @@ def _fit_forever(jobs: Queue[FitJob | None], outcomes: Queue[FitOutcome | None])
     libraries loaded when they are set, so the fit libraries are imported first (scikit-learn
     brings its own OpenMP runtime, which would otherwise run k-means on every core)."""
     os.nice(FIT_NICENESS)
-    for library in FIT_LIBRARIES:
-        importlib.import_module(library)
+    # Imported before saying ready, so that no fit's time limit pays for it; the service itself
+    # imports it only if it ever fits in place (a version-1 database).
+    import sklearn.mixture  # noqa: F401
+
     threadpool_limits(limits=1)
     outcomes.cancel_join_thread()
     outcomes.put(None)

@@ -71,7 +71,7 @@ class ServiceProcess:
         command = [
             sys.executable,
             "-m",
-            "common.cli",
+            "kuka_curriculum",
             "serve",
             "--host",
             self.host,

@@ -32,7 +32,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from common.task_space import Task
+from common.client.task_space import Task
 
 log = logging.getLogger(__name__)
 

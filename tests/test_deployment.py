@@ -30,7 +30,7 @@ import click
 import pytest
 import yaml
 
-from common.cli import COMMANDS
+from kuka_curriculum import COMMANDS
 from learner.cli import PUBLIC_URL_VARIABLE
 from learner.cli import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from learner.config import TrainConfig
@@ -126,7 +126,7 @@ def parse_kuka_curriculum(argv: list[str]) -> argparse.Namespace:
     name, *arguments = argv[1:]
     assert name in COMMANDS, f"kuka-curriculum has no sub-command {name!r} (has: {', '.join(COMMANDS)})"
     parser = argparse.ArgumentParser(prog=f"kuka-curriculum {name}")
-    importlib.import_module(COMMANDS[name][0]).add_arguments(parser)
+    COMMANDS[name].load().add_arguments(parser)
     try:
         return parser.parse_args(arguments)
     except SystemExit:

@@ -37,7 +37,7 @@ import httpx
 import numpy as np
 import pytest
 
-from common.schemas import API_PREFIX
+from common.client.schemas import API_PREFIX
 from teacher_service.process import free_port
 
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(1500)]

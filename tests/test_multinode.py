@@ -21,7 +21,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from common.schemas import API_PREFIX
+from common.client.schemas import API_PREFIX
 from teacher_service.process import free_port
 
 pytestmark = [pytest.mark.multinode, pytest.mark.timeout(420)]

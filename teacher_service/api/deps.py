@@ -12,7 +12,7 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Path, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from common.schemas import CURRICULUM_NAME_PATTERN
+from common.client.schemas import CURRICULUM_NAME_PATTERN
 from teacher_service.core.config import Settings
 from teacher_service.curricula import Curriculum, UnknownCurriculum
 from teacher_service.metrics import ServiceMetrics

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from common.schemas import CurriculumCounters, CurriculumInfo, CurriculumState
+from common.client.schemas import CurriculumCounters, CurriculumInfo, CurriculumState
 from teacher_service.curricula import Curriculum
 
 

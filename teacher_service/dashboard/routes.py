@@ -18,7 +18,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse
 
-from common.schemas import API_PREFIX, CURRICULUM_NAME_PATTERN
+from common.client.schemas import API_PREFIX, CURRICULUM_NAME_PATTERN
 
 PACKAGE_DIR = Path(__file__).parent
 PLOTLY_JS = Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))

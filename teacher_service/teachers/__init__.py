@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
-from common.task_space import TaskSpace
+from common.client.task_space import TaskSpace
 from teacher_service.teachers.adr import AdrTeacher
 from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher

@@ -29,7 +29,7 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import FiniteFloat, TeacherParams

@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.row_log import RowLog
 

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from pydantic import Field, model_validator
 
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.alp_gmm import (
     MAX_COMPONENTS,
     MAX_EM_INITS,

@@ -15,8 +15,8 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 from typing_extensions import Self
 
-from common.schemas import FiniteFloat
-from common.task_space import Task, TaskSpace
+from common.client.schemas import FiniteFloat
+from common.client.task_space import Task, TaskSpace
 
 TaskParam = Annotated[
     dict[Annotated[str, Field(max_length=64)], FiniteFloat],

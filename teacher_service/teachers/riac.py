@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 from pydantic import Field, model_validator
 
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import TeacherParams

@@ -58,7 +58,7 @@ from scipy.optimize import Bounds, NonlinearConstraint, minimize
 from scipy.special import ndtri
 from threadpoolctl import ThreadpoolController
 
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor

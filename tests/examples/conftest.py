@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from example_runner import TOKEN
 
-from common.curriculum_wrapper import TOKEN_VARIABLE
+from common.client.curriculum_wrapper import TOKEN_VARIABLE
 from teacher_service.process import ServiceProcess
 
 

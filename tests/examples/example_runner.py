@@ -10,8 +10,8 @@ from typing import Any
 
 import httpx
 
-from common.curriculum_wrapper import TOKEN_VARIABLE
-from common.schemas import API_PREFIX
+from common.client.curriculum_wrapper import TOKEN_VARIABLE
+from common.client.schemas import API_PREFIX
 from teacher_service.process import ServiceProcess
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

@@ -10,7 +10,7 @@ import subprocess
 import pytest
 from example_runner import EXAMPLES, curriculum_state, finish, start_example
 
-from common.curriculum_wrapper import TOKEN_VARIABLE
+from common.client.curriculum_wrapper import TOKEN_VARIABLE
 from teacher_service.teachers import TEACHER_KINDS
 
 pytestmark = pytest.mark.skipif(not (shutil.which("curl") and shutil.which("jq")), reason="needs curl and jq")

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from example_runner import TOKEN, curriculum_state, finish, start_example
 
-from common.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.task_space import Parameter, TaskSpace
+from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
+from common.client.task_space import Parameter, TaskSpace
 from examples.sb3_pendulum_gravity import PENDULUM_TASK_SPACE, apply_pendulum_task
 
 HORIZONTAL, BOTTOM = math.pi / 2, math.pi  # Pendulum-v1 measures its angle from upright

@@ -11,8 +11,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from common.task_space import Task
-from common.trajectory import EpisodeStats
+from common.client.task_space import Task
+from common.policy.trajectory import EpisodeStats
 
 OBS_SCALE = np.array([40.0, 0.05], dtype=np.float32)
 OBS_OFFSET = np.array([300.0, -7.0], dtype=np.float32)

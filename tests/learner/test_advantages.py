@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from common.trajectory import TrajectoryBatch
+from common.policy.trajectory import TrajectoryBatch
 from learner.ppo import compute_advantages
 
 

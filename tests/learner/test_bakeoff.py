@@ -7,10 +7,10 @@ import json
 import imageio.v3 as iio
 import pytest
 
-from common import HARD_ENV_ID
-from common.cli import main
-from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
-from common.trajectory import EpisodeStats
+from common.kuka import HARD_ENV_ID
+from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.policy.trajectory import EpisodeStats
+from kuka_curriculum import main
 from learner.bakeoff_report import BOOK_RETURNS, results_markdown
 from learner.bakeoff_runs import Run, learning_curve, plan_runs
 from learner.bakeoff_statistics import TeacherResult, median_steps, steps_to_success

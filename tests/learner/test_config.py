@@ -1,6 +1,6 @@
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.config import TEACHERS, PPOConfig, TrainConfig
 from teacher_service.teachers import make_teacher
 

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 from tiny_checkpoint import TINY_EPISODE_STEPS, save_untrained_checkpoint
 
-from common import HARD_ENV_ID
-from common.cli import main
-from common.kuka_env import KukaGraspEnv, KukaGraspHardEnv
-from common.policy import InferencePolicy
-from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.kuka import HARD_ENV_ID
+from common.kuka.env import KukaGraspEnv, KukaGraspHardEnv
+from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.policy.actor_critic import InferencePolicy
+from kuka_curriculum import main
 from learner.checkpoint import load_checkpoint
 from learner.checkpoint_arguments import parse_task
 from learner.checkpoint_evaluation import describe_task, evaluate_policy

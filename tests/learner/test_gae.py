@@ -4,7 +4,7 @@ written the other way round: a forward sum of discounted TD errors per step, not
 import numpy as np
 import pytest
 
-from common.trajectory import TrajectoryBatch
+from common.policy.trajectory import TrajectoryBatch
 from learner.ppo import compute_advantages
 
 GAMMA, LAMBDA = 0.9, 0.8

@@ -3,7 +3,7 @@ import pytest
 import torch
 from reach_env import ReachTarget, RecordingTasks
 
-from common.policy import InferencePolicy, PolicySpec
+from common.policy.actor_critic import InferencePolicy, PolicySpec
 from learner.config import PPOConfig
 from learner.ppo import PPOLearner
 from rollout_worker.sampler import Sampler, run_episodes

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import torch
 
-from common.policy import PolicySpec
-from common.trajectory import TrajectoryBatch
+from common.policy.actor_critic import PolicySpec
+from common.policy.trajectory import TrajectoryBatch
 from learner.config import PPOConfig
 from learner.ppo import PPOLearner, ppo_losses
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from tiny_checkpoint import save_untrained_checkpoint
 
-from common.cli import main
-from common.kuka_env import KukaGraspEnv
+from common.kuka.env import KukaGraspEnv
+from kuka_curriculum import main
 from learner.render import FAILURE_COLOUR, SUCCESS_COLOUR, label_frame
 
 HAS_FFMPEG = importlib.util.find_spec("imageio_ffmpeg") is not None

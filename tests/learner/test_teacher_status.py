@@ -8,8 +8,8 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import TeacherClient
+from common.client.teacher_client import TeacherClient
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.teacher_status import TeacherStatus
 from teacher_service.process import ServiceProcess, free_port
 

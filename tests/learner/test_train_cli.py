@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from common.cli import main
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.task_space import KUKA_TASK_SPACE
+from kuka_curriculum import main
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import TrainConfig
 from learner.kuka_policy import kuka_policy_spec

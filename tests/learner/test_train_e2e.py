@@ -13,7 +13,7 @@ from pathlib import Path
 import httpx
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from common.schemas import API_PREFIX
+from common.client.schemas import API_PREFIX
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.cli import curriculum_name
 from learner.teacher_process import local_teacher_service
@@ -45,7 +45,7 @@ def train_command(run_dir: Path, ray_address: str, *flags: str) -> list[str]:
     return [
         sys.executable,
         "-m",
-        "common.cli",
+        "kuka_curriculum",
         "train",
         *SMALL_RUN,
         "--run-dir",
@@ -174,7 +174,7 @@ def test_a_teacher_outage_mid_run_loses_no_episode_result(tmp_path, ray_cluster)
     serve = [
         sys.executable,
         "-m",
-        "common.cli",
+        "kuka_curriculum",
         "serve",
         "--port",
         str(port),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common import ENV_ID
+from common.kuka import ENV_ID
 from learner.checkpoint import Counters, save_checkpoint
 from learner.config import PPOConfig, TrainConfig
 from learner.kuka_policy import kuka_policy_spec

@@ -1,11 +1,12 @@
 import numpy as np
 import pytest
 
-from common.kuka_env import KukaGraspEnv
-from common.normalizer import RunningNormalizer
-from common.policy import ActorCritic, InferencePolicy, PolicySnapshot, PolicySpec
-from common.task_space import KUKA_TASK_SPACE, Task
-from common.trajectory import EpisodeStats
+from common.client.task_space import Task
+from common.kuka.env import KukaGraspEnv
+from common.kuka.task_space import KUKA_TASK_SPACE
+from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySnapshot, PolicySpec
+from common.policy.normalizer import RunningNormalizer
+from common.policy.trajectory import EpisodeStats
 from rollout_worker.sampler import Sampler, run_episodes
 
 

@@ -20,8 +20,8 @@ import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
 
 from bench.dashboard_screenshot import DEBIAN_CHROMIUM, launch_chromium
-from common.schemas import API_PREFIX, ParameterSpec
-from common.task_space import KUKA_TASK_SPACE
+from common.client.schemas import API_PREFIX, ParameterSpec
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess
 from teacher_service.teachers import TEACHER_KINDS
 

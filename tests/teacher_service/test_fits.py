@@ -18,7 +18,7 @@ from typing import Any
 import fit_jobs
 import httpx
 
-from common.task_space import Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.fits import FitOutcome, FitRunner
 from teacher_service.metrics import ServiceMetrics
 from teacher_service.process import ServiceProcess

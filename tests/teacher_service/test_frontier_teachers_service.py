@@ -9,8 +9,8 @@ from typing import Any
 
 import httpx
 
-from common.schemas import ParameterSpec
-from common.task_space import Parameter, TaskSpace
+from common.client.schemas import ParameterSpec
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.process import ServiceProcess
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 

@@ -13,7 +13,7 @@ from typing import Any
 import httpx
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.task_space import KUKA_TASK_SPACE
 
 
 def _create(

@@ -80,7 +80,7 @@ def test_an_empty_token_means_none(monkeypatch):
 def test_serve_exits_with_the_reason_before_it_listens(tmp_path, token):
     port = free_port()
     result = subprocess.run(
-        [sys.executable, "-m", "common.cli", "serve", "--port", str(port), "--db", str(tmp_path / "teacher.db")],
+        [sys.executable, "-m", "kuka_curriculum", "serve", "--port", str(port), "--db", str(tmp_path / "teacher.db")],
         env={**os.environ, "KC_TEACHER_TOKEN": token},
         capture_output=True,
         text=True,

@@ -21,8 +21,8 @@ from typing import Any
 import httpx
 import pytest
 
-from common.schemas import ParameterSpec
-from common.task_space import KUKA_TASK_SPACE
+from common.client.schemas import ParameterSpec
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess
 from teacher_service.teachers import EpisodeResult, FitJob, Teacher, make_teacher
 

@@ -20,8 +20,8 @@ import httpx
 import pytest
 import uvicorn
 
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import Backoff, TeacherClient
+from common.client.teacher_client import Backoff, TeacherClient
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.app import create_app
 from teacher_service.core.config import Settings
 from teacher_service.process import free_port
@@ -226,7 +226,7 @@ def test_every_write_of_a_failed_group_is_answered(service: InProcessService, ku
 def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_room(
     service: InProcessService, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level(logging.INFO, logger="common.teacher_client")
+    caplog.set_level(logging.INFO, logger="common.client.teacher_client")
     with TeacherClient(service.url, "client", token=TOKEN, prefetch=1000, backoff=Backoff(0.01, 0.2)) as client:
         client.register("random", KUKA_TASK_SPACE)
         assignments = [client.next_task() for _ in range(1000)]

@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Query, Response, status
 from fastapi.exceptions import RequestValidationError
 
-from common.schemas import (
+from common.client.schemas import (
     API_PREFIX,
     CurriculumInfo,
     CurriculumList,

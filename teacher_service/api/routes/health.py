@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST
 
-from common.schemas import Health
+from common.client.schemas import Health
 from teacher_service.api.deps import MetricsDep, RegistryDep
 
 router = APIRouter(tags=["service"])

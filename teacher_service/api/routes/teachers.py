@@ -13,7 +13,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from common.schemas import API_PREFIX, TeacherKindInfo, TeacherKindList, TeacherParameterInfo
+from common.client.schemas import API_PREFIX, TeacherKindInfo, TeacherKindList, TeacherParameterInfo
 from teacher_service.teachers import TEACHER_KINDS, Teacher
 
 router = APIRouter(prefix=f"{API_PREFIX}/teachers", tags=["teachers"])

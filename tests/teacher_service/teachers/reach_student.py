@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from common.task_space import Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, Teacher
 
 SQUARE = TaskSpace(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from common.task_space import Task
+from common.client.task_space import Task
 from teacher_service.teachers import EpisodeResult, Teacher
 
 

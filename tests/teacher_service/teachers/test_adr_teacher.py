@@ -9,7 +9,8 @@ from typing import Any
 import pytest
 from reach_student import SQUARE, ReachStudent, practise
 
-from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 

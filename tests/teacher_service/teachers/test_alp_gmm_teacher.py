@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, make_teacher
 from teacher_service.teachers import alp_gmm as alp_gmm_module
 from teacher_service.teachers.alp_gmm import TREE_GROWTH, AlpGmmTeacher, MixtureFit, fit_mixture

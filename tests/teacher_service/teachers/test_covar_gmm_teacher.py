@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from common.task_space import Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
 from teacher_service.teachers.alp_gmm import MixtureFit
 from teacher_service.teachers.covar_gmm import CovarGmmTeacher

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scripted_student import run_student
 
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import Teacher, make_teacher
 
 RELEASE_EVERY = 1_000

@@ -8,7 +8,8 @@ from typing import Any
 
 import pytest
 
-from common.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 

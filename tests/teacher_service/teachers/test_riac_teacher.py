@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from common.task_space import Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 from teacher_service.teachers.riac import RiacTeacher, progress
 

@@ -13,7 +13,8 @@ import pytest
 from reach_student import SQUARE, ReachStudent, practise
 from scipy.special import ndtri
 
-from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 from teacher_service.teachers.self_paced import Gaussian, _pull_back, update_gaussian
 

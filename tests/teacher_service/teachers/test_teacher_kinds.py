@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scripted_student import run_student
 
-from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import TEACHER_KINDS, EpisodeResult, Teacher, make_teacher
 
 # Small fits keep the suite fast; the defaults are exercised in test_alp_gmm_teacher.py.

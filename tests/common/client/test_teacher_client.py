@@ -15,14 +15,14 @@ from collections.abc import Iterator
 import httpx
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE
-from common.teacher_client import (
+from common.client.teacher_client import (
     Assignment,
     Backoff,
     TeacherClient,
     TeacherRequestError,
     TeacherUnavailable,
 )
+from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess, free_port
 
 FAST_RETRIES = Backoff(base_s=0.01, cap_s=0.2)
@@ -99,7 +99,7 @@ def test_no_result_is_lost_across_a_service_restart(service):
 
 
 def test_an_outage_longer_than_the_buffer_drops_the_oldest_results_and_says_so_once(service, caplog):
-    caplog.set_level(logging.WARNING, logger="common.teacher_client")
+    caplog.set_level(logging.WARNING, logger="common.client.teacher_client")
     with _client(service, "bounded", prefetch=40, max_buffered_results=10) as client:
         client.register("random", KUKA_TASK_SPACE)
         assignments = [client.next_task() for _ in range(40)]

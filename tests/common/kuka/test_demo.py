@@ -5,7 +5,7 @@ from __future__ import annotations
 import imageio.v3 as iio
 import numpy as np
 
-from common.cli import main
+from kuka_curriculum import main
 
 
 def test_demo_writes_a_gif_into_a_new_folder(tmp_path, capsys):

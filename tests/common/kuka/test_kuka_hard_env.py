@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from common import ENV_ID, HARD_ENV_ID
-from common.kuka_env import (
+from common.kuka import ENV_ID, HARD_ENV_ID
+from common.kuka.env import (
     FAR_CENTRE,
     FAR_MIN_DISTANCE,
     FAR_X_RANGE,
@@ -20,7 +20,7 @@ from common.kuka_env import (
     KukaGraspHardEnv,
     make_kuka_env,
 )
-from common.task_space import (
+from common.kuka.task_space import (
     KUKA_HARD_BOOK_HARDEST,
     KUKA_HARD_TASK_SPACE,
     KUKA_TASK_SPACE,

@@ -15,7 +15,7 @@ import math
 import os
 from collections.abc import Sequence
 
-from common.bullet import BulletClient, pybullet
+from common.kuka.bullet import BulletClient, pybullet
 
 ARM_JOINTS = 7
 END_EFFECTOR_LINK = 6

@@ -14,8 +14,8 @@ import imageio.v3 as iio
 import numpy as np
 from tqdm import tqdm
 
-from common.kuka_env import KukaGraspEnv
-from common.task_space import KUKA_TASK_SPACE
+from common.kuka.env import KukaGraspEnv
+from common.kuka.task_space import KUKA_TASK_SPACE
 
 STEPS_PER_FRAME = 8
 FRAME_MS = 1000 * STEPS_PER_FRAME / KukaGraspEnv.metadata["render_fps"]

@@ -5,8 +5,8 @@ import pytest
 import torch
 from torch import nn
 
-from common.normalizer import RunningNormalizer
-from common.policy import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.actor_critic import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.normalizer import RunningNormalizer
 
 
 @pytest.fixture(params=[(), (1, 3)], ids=["raw", "angles"])

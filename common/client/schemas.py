@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from typing_extensions import Self
 
-from common.task_space import Parameter, Task, TaskSpace
+from common.client.task_space import Parameter, Task, TaskSpace
 
 API_PREFIX = "/api/v1"
 

@@ -41,15 +41,15 @@ import gymnasium
 from gymnasium.core import ActType, ObsType
 from pydantic import SecretStr
 
-from common.schemas import TeacherKind
-from common.task_space import Task, TaskSpace
-from common.teacher_client import (
+from common.client.schemas import TeacherKind
+from common.client.task_space import Task, TaskSpace
+from common.client.teacher_client import (
     Assignment,
     TeacherClient,
     TeacherRequestError,
     TeacherUnavailable,
 )
-from common.write_token import TOKEN_VARIABLE
+from common.client.write_token import TOKEN_VARIABLE
 
 log = logging.getLogger(__name__)
 

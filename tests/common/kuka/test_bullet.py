@@ -4,8 +4,8 @@ import os
 
 import gymnasium
 
-from common import ENV_ID
-from common.bullet import native_output_silenced
+from common.kuka import ENV_ID
+from common.kuka.bullet import native_output_silenced
 
 
 def test_making_an_environment_prints_nothing(capfd) -> None:

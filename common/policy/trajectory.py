@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.task_space import Task
+from common.client.task_space import Task
 
 
 @dataclass(frozen=True)

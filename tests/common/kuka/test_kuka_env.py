@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import common
-from common.kuka_env import KukaGraspEnv
-from common.task_space import KUKA_TASK_SPACE
+import common.kuka
+from common.kuka.env import KukaGraspEnv
+from common.kuka.task_space import KUKA_TASK_SPACE
 
 EASIEST = KUKA_TASK_SPACE.easiest()
 HARDEST = KUKA_TASK_SPACE.hardest()
@@ -60,20 +60,20 @@ def test_passes_gymnasium_env_checker():
 
 
 def test_registered_on_import_and_made_with_arguments():
-    env = gymnasium.make(common.ENV_ID, max_steps=3)
+    env = gymnasium.make(common.kuka.ENV_ID, max_steps=3)
     env.reset(seed=0)
     ends = [env.step(env.action_space.sample())[3] for _ in range(3)]
     assert ends == [False, False, True]
     env.close()
 
 
-def test_importing_common_does_not_load_pybullet():
+def test_importing_common_kuka_registers_the_ids_without_loading_pybullet():
     check = (
-        "import sys, common, gymnasium\n"
-        "assert common.ENV_ID in gymnasium.registry\n"
+        "import sys, common.kuka, gymnasium\n"
+        "assert common.kuka.ENV_ID in gymnasium.registry\n"
         "assert 'pybullet' not in sys.modules"
     )
-    subprocess.run([sys.executable, "-c", check], check=True, cwd=Path(__file__).resolve().parents[2])
+    subprocess.run([sys.executable, "-c", check], check=True, cwd=Path(__file__).resolve().parents[3])
 
 
 def test_same_seed_same_placement_and_trajectory():

@@ -60,7 +60,7 @@ from typing import Any
 import httpx
 from pydantic import SecretStr
 
-from common.schemas import (
+from common.client.schemas import (
     API_PREFIX,
     MAX_RESULTS_PER_REQUEST,
     MAX_TASKS_PER_REQUEST,
@@ -73,7 +73,7 @@ from common.schemas import (
     TaskBatch,
     TeacherKind,
 )
-from common.task_space import Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
 
 log = logging.getLogger(__name__)
 

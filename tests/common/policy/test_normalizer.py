@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from common.normalizer import RunningNormalizer
+from common.policy.normalizer import RunningNormalizer
 
 
 def test_statistics_folded_batch_by_batch_equal_those_of_all_the_data():

@@ -3,7 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from common.task_space import KUKA_TASK_SPACE, Parameter, TaskSpace
+from common.client.task_space import Parameter, TaskSpace
+from common.kuka.task_space import KUKA_TASK_SPACE
 
 
 def test_kuka_space_has_the_books_six_parameters_with_their_anchors():

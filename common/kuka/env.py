@@ -3,7 +3,7 @@
 The rules are those of pybullet's ``kukaGymEnv`` as used in the book (chapter 14): the agent moves
 the gripper in x/y and turns the wrist, the environment lowers it by a fixed amount every step,
 and the first touch of the tray triggers a scripted grasp that ends the episode. The curriculum
-task (``common.task_space.KUKA_TASK_SPACE``) sets how random the block's placement is and how low
+task (``common.kuka.task_space.KUKA_TASK_SPACE``) sets how random the block's placement is and how low
 the arm starts.
 
 Each environment owns a DIRECT-mode physics client, so any number can live in one process. The
@@ -13,7 +13,7 @@ of reloading every model (tens of milliseconds), with the same trajectories.
 ``KukaGraspHard-v0`` (``KukaGraspHardEnv``) is a harder family around the book's task, for which the
 book's hardest task needs no curriculum: three more parameters move the block far from where the
 gripper starts, fade out the reward's distance shaping and slow the gripper's x/y moves, so that
-actions without a purpose no longer reach the block (``common.task_space.KUKA_HARD_TASK_SPACE``).
+actions without a purpose no longer reach the block (``common.kuka.task_space.KUKA_HARD_TASK_SPACE``).
 """
 
 from __future__ import annotations
@@ -28,10 +28,11 @@ import numpy as np
 import pybullet_data
 from gymnasium import spaces
 
-from common import ENV_ID, HARD_ENV_ID
-from common.bullet import direct_client, pybullet
-from common.kuka_arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
-from common.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE, Task, TaskSpace
+from common.client.task_space import Task, TaskSpace
+from common.kuka import ENV_ID, HARD_ENV_ID
+from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
+from common.kuka.bullet import direct_client, pybullet
+from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 
 TIME_STEP = 1.0 / 240.0
 SOLVER_ITERATIONS = 150

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from common.normalizer import NORMALIZER_EPSILON, NormalizerState, RunningNormalizer
+from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState, RunningNormalizer
 
 
 @dataclass(frozen=True)

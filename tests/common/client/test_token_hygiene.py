@@ -6,7 +6,7 @@ import logging
 
 from pydantic import SecretStr
 
-from common.teacher_client import TeacherClient
+from common.client.teacher_client import TeacherClient
 from rollout_worker.actor import WorkerSettings
 from teacher_service.core.config import Settings
 from teacher_service.process import free_port

@@ -19,16 +19,16 @@ import httpx
 import numpy as np
 import pytest
 
-from common import ENV_ID
-from common.curriculum_wrapper import (
+from common.client.curriculum_wrapper import (
     TOKEN_VARIABLE,
     CurriculumError,
     CurriculumRegistration,
     CurriculumWrapper,
     TaskRejected,
 )
-from common.schemas import API_PREFIX
-from common.task_space import Parameter, Task, TaskSpace
+from common.client.schemas import API_PREFIX
+from common.client.task_space import Parameter, Task, TaskSpace
+from common.kuka import ENV_ID
 from teacher_service.process import ServiceProcess, free_port
 
 TOKEN = "wrapper-test-token"
@@ -107,7 +107,7 @@ def counters(service: ServiceProcess, curriculum: str) -> dict[str, Any]:
 
 def test_the_module_imports_without_torch_ray_or_pybullet():
     code = (
-        "import sys, common.curriculum_wrapper; "
+        "import sys, common.client.curriculum_wrapper; "
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'ray', 'pybullet', 'pybullet_data')))"
     )
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

@@ -1,0 +1,97 @@
+"""The ``kuka-curriculum`` console script: the top of the import graph, which no package imports.
+
+Each sub-command lives in the package that owns it. Its module is imported only when chosen (by a
+plain import inside a loader, so the graph still shows the arrow), so ``serve`` starts without
+loading torch and ``train`` without loading the web stack. A command module provides
+``add_arguments(parser)`` and ``run(args) -> int``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from typing import NamedTuple, Protocol
+
+
+class CommandModule(Protocol):
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def run(self, args: argparse.Namespace) -> int: ...
+
+
+class Command(NamedTuple):
+    summary: str
+    load: Callable[[], CommandModule]
+
+
+def _demo() -> CommandModule:
+    from common.kuka import demo
+
+    return demo
+
+
+def _train() -> CommandModule:
+    from learner import cli
+
+    return cli
+
+
+def _serve() -> CommandModule:
+    from teacher_service import cli
+
+    return cli
+
+
+def _evaluate() -> CommandModule:
+    from learner import evaluate
+
+    return evaluate
+
+
+def _render() -> CommandModule:
+    from learner import render
+
+    return render
+
+
+def _bakeoff() -> CommandModule:
+    from learner import bakeoff
+
+    return bakeoff
+
+
+COMMANDS: dict[str, Command] = {
+    "demo": Command("Write a short GIF of the KUKA grasp environment under random actions.", _demo),
+    "train": Command("Train the PPO policy with distributed rollouts and a curriculum teacher.", _train),
+    "serve": Command("Run the teacher service: curricula over HTTP, persisted in SQLite.", _serve),
+    "evaluate": Command("Evaluate a checkpoint's deterministic policy, with 95% confidence intervals.", _evaluate),
+    "render": Command("Write a GIF or MP4 of a checkpoint's policy at work.", _render),
+    "bakeoff": Command(
+        "Train and evaluate every teacher over several seeds; write a results table and curves.", _bakeoff
+    ),
+}
+
+
+def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="kuka-curriculum",
+        description="Curriculum learning for a simulated KUKA grasping arm.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, command in COMMANDS.items():
+        command_parser = sub.add_parser(name, help=command.summary.replace("%", "%%"), description=command.summary)
+        if name == chosen:
+            command.load().add_arguments(command_parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    chosen = next((a for a in argv if not a.startswith("-")), None)
+    args = _build_parser(chosen if chosen in COMMANDS else None).parse_args(argv)
+    return int(COMMANDS[args.command].load().run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

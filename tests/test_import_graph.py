@@ -1,0 +1,90 @@
+"""The house's import graph, read from the source: every arrow points down the design's layers, no
+module imports by string, and every package says its one job.
+
+Imports inside functions count too (the dispatcher loads each sub-command in one), so an arrow
+cannot hide from this test by being deferred.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("common", "teacher_service", "rollout_worker", "learner")
+DISPATCHER = "kuka_curriculum"
+
+MAY_IMPORT: dict[str, set[str]] = {
+    "common": set(),
+    "common.client": set(),
+    "common.kuka": {"common.client"},
+    "common.policy": {"common.client"},
+    "teacher_service": {"common.client"},
+    "rollout_worker": {"common.client", "common.kuka", "common.policy"},
+    "learner": {"common.client", "common.kuka", "common.policy", "rollout_worker", "teacher_service"},
+    DISPATCHER: {"common.kuka", "learner", "teacher_service"},
+}
+"""Each room and the rooms below it that it may use; a room may always use itself."""
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def room(module: str) -> str:
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "common" and len(parts) > 1 else parts[0]
+
+
+def sources() -> Iterator[Path]:
+    for package in PACKAGES:
+        yield from sorted((ROOT / package).rglob("*.py"))
+    yield ROOT / f"{DISPATCHER}.py"
+
+
+def first_party_imports(tree: ast.AST) -> Iterator[str]:
+    """The first-party modules (or names in them) that a module imports, anywhere in its body."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [f"{node.module}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        yield from (name for name in names if name.split(".")[0] in (*PACKAGES, DISPATCHER))
+
+
+def imports_by_string(tree: ast.AST) -> Iterator[str]:
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            called = ast.unparse(node.func)
+            if called in ("importlib.import_module", "import_module", "__import__"):
+                yield ast.unparse(node)
+
+
+def test_every_import_points_down_the_layers():
+    upward = []
+    for path in sources():
+        importer = module_name(path)
+        for imported in first_party_imports(ast.parse(path.read_text())):
+            source, target = room(importer), room(imported)
+            if target != source and target not in MAY_IMPORT[source]:
+                upward.append(f"{importer} imports {imported}")
+    assert not upward, "imports against the layers:\n" + "\n".join(upward)
+
+
+def test_no_module_imports_by_string():
+    found = [
+        f"{module_name(path)}: {call}" for path in sources() for call in imports_by_string(ast.parse(path.read_text()))
+    ]
+    assert not found, "imports by string:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("init", sorted(path for package in PACKAGES for path in (ROOT / package).rglob("__init__.py")))
+def test_each_package_says_its_job(init: Path):
+    docstring = ast.get_docstring(ast.parse(init.read_text()))
+    assert docstring and len(docstring.split()) >= 5, f"{module_name(init)} needs a docstring that says its one job"
