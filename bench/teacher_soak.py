@@ -39,6 +39,9 @@ SOAK_PARAMS: dict[str, dict[str, object]] = {
 }
 """ALP-GMM with its smallest nearest-task window and RIAC with few regions, so that their curricula
 reach their memory bounds within minutes; every other kind with its defaults."""
+SOAK_SERVICE_ENV = {"KC_TASK_WINDOW": "2000"}
+"""A task is forgotten 2,000 tasks after it was handed out (the default is 10,000), for the same
+reason: each curriculum's bookkeeping of tasks awaiting results reaches its bound within the soak."""
 ABANDON_SHARE = 0.05
 """Share of drawn tasks whose episode is 'lost' and never reported."""
 MOVE_EVERY_S = 30.0
@@ -199,7 +202,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="teacher-soak-") as directory:
         db = Path(directory) / "teacher.db"
-        service = ServiceProcess(db)
+        service = ServiceProcess(db, env=SOAK_SERVICE_ENV)
         service.start()
         try:
             outcome = asyncio.run(_soak(service, args.clients, args.minutes * 60, args.memory_every))
