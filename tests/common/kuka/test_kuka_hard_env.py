@@ -9,6 +9,7 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from test_kuka_env import random_actions, rollout
 
 from common.kuka import ENV_ID, HARD_ENV_ID
 from common.kuka.env import (
@@ -30,20 +31,6 @@ from common.kuka.task_space import (
 
 HARDEST = KUKA_HARD_TASK_SPACE.hardest()
 EASIEST = KUKA_HARD_TASK_SPACE.easiest()
-
-
-def random_actions(seed: int, count: int) -> np.ndarray:
-    return np.random.default_rng(seed).uniform(-1.0, 1.0, size=(count, 3)).astype(np.float32)
-
-
-def rollout(env: KukaGraspEnv, actions: np.ndarray) -> list[tuple]:
-    trajectory = []
-    for action in actions:
-        observation, reward, terminated, truncated, info = env.step(action)
-        trajectory.append((observation.tobytes(), reward, terminated, truncated, info["is_success"]))
-        if terminated or truncated:
-            break
-    return trajectory
 
 
 def block_xy(env: KukaGraspEnv) -> np.ndarray:
