@@ -33,8 +33,12 @@ match, so changing a parameter runs anew beside the old lines. The summary table
 covers every line in the file, not only this invocation's. One file holds one ``--episodes``; an
 unfinished last line (a kill mid-write) is dropped.
 
+``--jobs N`` plays N runs at once in N processes, each with its own service; the driver alone writes
+the results file. A run's score does not depend on it (each run is its own seeded curriculum and
+toy); its recorded seconds then include the other jobs' contention.
+
 Usage: PYTHONPATH=. .venv/bin/python bench/teacher_toy.py [--episodes 20000] [--seeds 5]
-       [--teachers covar-gmm,riac,random] [--spaces 2,6] [--batch 1]
+       [--teachers covar-gmm,riac,random] [--spaces 2,6] [--batch 1] [--jobs 1]
        [--teacher-param self-paced.target=uniform] [--reference ../shared/reference-teachers]
        [--out teacher_toy.jsonl] [--json toy.json]
 """
@@ -46,6 +50,7 @@ import fcntl
 import importlib
 import itertools
 import json
+import multiprocessing
 import os
 import shutil
 import signal
@@ -60,7 +65,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import Any, Protocol
 
 import httpx
 import numpy as np
@@ -241,6 +246,12 @@ def toy_space(dims: int) -> list[dict[str, Any]]:
     return [{"name": f"x{i}", "low": 0.0, "high": 1.0, "easiest": 0.0, "hardest": 1.0} for i in range(dims)]
 
 
+class Progress(Protocol):
+    """Where finished episodes are counted: the progress bar, or a job's message queue."""
+
+    def update(self, n: int) -> object: ...
+
+
 def play(toy: Toy, episodes: int, checkpoints: list[int], step: Callable[[int], int]) -> dict[int, float]:
     """Call ``step(at_most)`` (which plays some episodes and returns how many) until ``episodes``,
     reading the score at each checkpoint."""
@@ -256,7 +267,7 @@ def play(toy: Toy, episodes: int, checkpoints: list[int], step: Callable[[int], 
 class ServiceRunner:
     """Our teachers, one curriculum per run, through the HTTP API of one service."""
 
-    def __init__(self, url: str, batch: int, bar: tqdm[Any]) -> None:
+    def __init__(self, url: str, batch: int, bar: Progress) -> None:
         self.http = httpx.Client(base_url=f"{url}{API_PREFIX}/curricula", timeout=60.0)
         self.batch = batch
         self.bar = bar
@@ -321,7 +332,7 @@ def reference_modules(directory: Path) -> Iterator[dict[str, Any]]:
 
 
 def run_reference(
-    teacher_class: Any, dims: int, seed: int, episodes: int, checkpoints: list[int], bar: tqdm[Any]
+    teacher_class: Any, dims: int, seed: int, episodes: int, checkpoints: list[int], bar: Progress
 ) -> dict[int, float]:
     np.random.seed(seed)
     teacher = teacher_class([0.0] * dims, [1.0] * dims, seed=seed)
@@ -437,7 +448,7 @@ def execute(
     batch: int,
     reference: Path | None,
     checkpoints: list[int],
-    bar: tqdm[Any],
+    bar: Progress,
     finish: Callable[[Run], None],
 ) -> None:
     """Play each run in ``todo`` (ours on one service, then the reference's) and ``finish`` it."""
@@ -476,6 +487,83 @@ def execute(
                 finish(Run(run_id, mastered, None, time.perf_counter() - start, now_utc()))
 
 
+class QueuedProgress:
+    """A job's progress, sent to the driver's bar."""
+
+    def __init__(self, messages: multiprocessing.Queue[tuple[str, Any]]) -> None:
+        self.messages = messages
+
+    def update(self, n: int) -> None:
+        self.messages.put(("episodes", n))
+
+
+def play_share(
+    share: list[RunId],
+    batch: int,
+    reference: Path | None,
+    checkpoints: list[int],
+    messages: multiprocessing.Queue[tuple[str, Any]],
+) -> None:
+    """One job: play its share of the runs, sending each finished run to the driver, which writes it."""
+    signal.signal(signal.SIGTERM, stop_on_sigterm)
+    try:
+        execute(
+            share,
+            batch,
+            reference,
+            checkpoints,
+            QueuedProgress(messages),
+            lambda run: messages.put(("run", run.record())),
+        )
+        messages.put(("done", None))
+    except KeyboardInterrupt:
+        messages.put(("done", None))
+    except BaseException as error:
+        messages.put(("failed", repr(error)))
+        raise
+
+
+def execute_in_jobs(
+    todo: list[RunId],
+    jobs: int,
+    batch: int,
+    reference: Path | None,
+    checkpoints: list[int],
+    bar: tqdm[Any],
+    finish: Callable[[Run], None],
+) -> None:
+    """Split ``todo`` over ``jobs`` processes, each with its own service; this process alone writes
+    the results file. A stop (SIGTERM, Ctrl-C) or a failed job stops every job."""
+    context = multiprocessing.get_context("spawn")
+    messages: multiprocessing.Queue[tuple[str, Any]] = context.Queue()
+    workers = [
+        context.Process(target=play_share, args=(todo[job::jobs], batch, reference, checkpoints, messages))
+        for job in range(min(jobs, len(todo)))
+    ]
+    for worker in workers:
+        worker.start()
+    try:
+        running = len(workers)
+        while running:
+            kind, value = messages.get()
+            if kind == "episodes":
+                bar.update(value)
+            elif kind == "run":
+                finish(Run.from_record(value))
+            elif kind == "done":
+                running -= 1
+            else:
+                raise SystemExit(f"a job failed: {value}")
+    except BaseException:
+        for worker in workers:
+            if worker.is_alive():
+                worker.terminate()
+        raise
+    finally:
+        for worker in workers:
+            worker.join()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=CHECKPOINTS[-1], help="episodes per run")
@@ -483,6 +571,9 @@ def main() -> None:
     parser.add_argument("--teachers", default="", help="comma-separated kinds (default: every registered kind)")
     parser.add_argument("--spaces", default="2,6", help="comma-separated task-space dimensions (2 and/or 6)")
     parser.add_argument("--batch", type=int, default=1, help="tasks drawn per request")
+    parser.add_argument(
+        "--jobs", type=int, default=1, help="runs played at once, each job with its own service (one core each)"
+    )
     parser.add_argument(
         "--teacher-param",
         action="append",
@@ -496,8 +587,8 @@ def main() -> None:
     )
     parser.add_argument("--json", type=Path, help="also write every run in the results file as one JSON document")
     args = parser.parse_args()
-    if min(args.episodes, args.seeds, args.batch) < 1:
-        parser.error("--episodes, --seeds and --batch must be at least 1")
+    if min(args.episodes, args.seeds, args.batch, args.jobs) < 1:
+        parser.error("--episodes, --seeds, --batch and --jobs must be at least 1")
     kinds = [k for k in args.teachers.split(",") if k] or sorted(TEACHER_KINDS)
     unknown = sorted(set(kinds) - set(TEACHER_KINDS))
     if unknown:
@@ -543,7 +634,10 @@ def main() -> None:
                     runs.append(run)
                     bar.write(describe(run))
 
-                execute(todo, args.batch, args.reference, checkpoints, bar, finish)
+                if args.jobs == 1:
+                    execute(todo, args.batch, args.reference, checkpoints, bar, finish)
+                else:
+                    execute_in_jobs(todo, args.jobs, args.batch, args.reference, checkpoints, bar, finish)
         except KeyboardInterrupt:
             raise SystemExit(f"stopped; {len(runs)} runs are in {args.out}: run the same command to resume") from None
 
