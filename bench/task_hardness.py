@@ -5,6 +5,9 @@ Three fixed policies play the same episodes (episode ``i`` is seeded ``seed + i`
 of the family, from the easiest to the hardest:
 - ``zero``: no action; the gripper descends where it starts;
 - ``random``: uniform random actions, as an untrained explorer;
+- ``drift``: PPO's starting action noise (Gaussian, std ``DRIFT_STD``) around a mean x/y move drawn
+  once per episode, uniform in [-1, 1]^2: a policy whose mean has drifted, as PPO's does while its
+  advantages are noise, ends its descent wherever that mean carries it, the box's edges included;
 - ``scripted``: a hand-made controller that reads only the observation, moves the gripper over the
   block and turns the wrist across it: it shows the point can be solved, not how well PPO can.
 
@@ -28,21 +31,24 @@ import numpy as np
 from common.client.task_space import Task
 from common.kuka import ENV_IDS, HARD_ENV_ID
 from common.kuka.env import KukaGraspEnv, make_kuka_env
-from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
+from common.kuka.task_space import ALIGN_MARGIN_HARDEST, KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
 from learner.stats import wilson_interval
 
-POLICIES = ("zero", "random", "scripted")
+POLICIES = ("zero", "random", "drift", "scripted")
 CHUNK = 50
 """Episodes per unit of work handed to a process."""
 SCRIPT_GAIN = 100.0
 """Scripted controller: action per metre of x/y offset (saturates beyond 1 cm)."""
 SCRIPT_YAW_GAIN = 5.0
 """Scripted controller: wrist action per radian of misalignment."""
+DRIFT_STD = math.exp(-0.5)
+"""Drift policy: the action noise of an untrained policy (``PPOConfig.init_log_std`` -0.5)."""
 
-Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+Policy = Callable[[np.ndarray], np.ndarray]
+"""Observation to action, for one episode."""
 
 
-def scripted_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def scripted_action(observation: np.ndarray) -> np.ndarray:
     """Move over the block and turn the fingers across it, from the observation alone.
 
     The block's offset in the gripper's frame (entries 6 and 7) maps to the world by the gripper's yaw
@@ -57,25 +63,25 @@ def scripted_action(observation: np.ndarray, rng: np.random.Generator) -> np.nda
     return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
-def _zero_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    return np.zeros(3, dtype=np.float32)
-
-
-def _random_action(observation: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    return rng.uniform(-1.0, 1.0, size=3).astype(np.float32)
-
-
-POLICY_FUNCTIONS: dict[str, Policy] = {"zero": _zero_action, "random": _random_action, "scripted": scripted_action}
+def episode_policy(name: str, rng: np.random.Generator) -> Policy:
+    """The named policy for one episode, its randomness drawn from ``rng``."""
+    if name == "zero":
+        return lambda observation: np.zeros(3, dtype=np.float32)
+    if name == "random":
+        return lambda observation: rng.uniform(-1.0, 1.0, size=3).astype(np.float32)
+    if name == "drift":
+        mean = np.array([*rng.uniform(-1.0, 1.0, size=2), 0.0])
+        return lambda observation: np.clip(mean + DRIFT_STD * rng.standard_normal(3), -1.0, 1.0).astype(np.float32)
+    return scripted_action
 
 
 def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, float, int]:
     """One episode: (success, return, length)."""
-    act = POLICY_FUNCTIONS[policy]
-    rng = np.random.default_rng(seed)
+    act = episode_policy(policy, np.random.default_rng(seed))
     observation, _ = env.reset(seed=seed, options={"task": task})
     total, length = 0.0, 0
     while True:
-        observation, reward, terminated, truncated, info = env.step(act(observation, rng))
+        observation, reward, terminated, truncated, info = env.step(act(observation))
         total += reward
         length += 1
         if terminated or truncated:
@@ -93,8 +99,8 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[t
 def points(env_id: str) -> dict[str, Task]:
     """The family's easiest and hardest points, the book's hardest where it is a point of the family,
     and points in between: every parameter a share of the way from its easiest to its hardest value,
-    then the hard family's placement and speed walked alone from the book's hardest (``shaping``
-    changes the returns only, not whether a fixed policy succeeds)."""
+    then the hard family's placement, speed and alignment margin each alone at the book's hardest
+    (``shaping`` changes the returns only, not whether a fixed policy succeeds)."""
     space = task_space_for(env_id)
     easiest, hardest = space.easiest(), space.hardest()
     named = {"easiest": easiest}
@@ -109,6 +115,7 @@ def points(env_id: str) -> dict[str, Task]:
             named[f"book's hardest, obj_far={share:g}"] = {**book, "obj_far": share}
         for scale in (0.5, MOVE_SCALE_HARDEST):
             named[f"book's hardest, move_scale={scale:g}"] = {**book, "move_scale": scale}
+        named[f"book's hardest, align_margin={ALIGN_MARGIN_HARDEST:g}"] = {**book, "align_margin": ALIGN_MARGIN_HARDEST}
     named["hardest"] = hardest
     return named
 

@@ -6,15 +6,15 @@
 # evaluates on episode seeds 100000+, so none of these is reused there. The last run, ALP-GMM with
 # train's defaults, is a probe of whether a curriculum gets anywhere, not a bake-off result.
 #
-#   setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen.sh > runs/hard-screen/driver.log 2>&1 &
+#   mkdir -p runs/hard-screen-v4 && setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen.sh > runs/hard-screen-v4/driver.log 2>&1 &
 #
-# Variables: PYTHON (default .venv/bin/python), OUT (default runs/hard-screen).
+# Variables: PYTHON (default .venv/bin/python), OUT (default runs/hard-screen-v4; v3's runs are in runs/hard-screen).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
-OUT=${OUT:-runs/hard-screen}
+OUT=${OUT:-runs/hard-screen-v4}
 ENV_ID=KukaGraspHard-v0
-EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1,"move_scale":1}'
+EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1,"move_scale":1,"align_margin":90}'
 mkdir -p "$OUT"
 
 train() {  # NAME TEACHER STEPS SEED [extra train flags...]

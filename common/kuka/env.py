@@ -11,9 +11,10 @@ scene is loaded once and snapshotted; a reset restores the snapshot in under a m
 of reloading every model (tens of milliseconds), with the same trajectories.
 
 ``KukaGraspHard-v0`` (``KukaGraspHardEnv``) is a harder family around the book's task, for which the
-book's hardest task needs no curriculum: three more parameters move the block far from where the
-gripper starts, fade out the reward's distance shaping and slow the gripper's x/y moves, so that
-actions without a purpose no longer reach the block (``common.kuka.task_space.KUKA_HARD_TASK_SPACE``).
+book's hardest task needs no curriculum: four more parameters move the block far from where the
+gripper starts, fade out the reward's distance shaping, slow the gripper's x/y moves and count a lift
+only when the fingers closed square to the block, so that actions without a purpose no longer grasp
+it (``common.kuka.task_space.KUKA_HARD_TASK_SPACE``).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from common.client.task_space import Task, TaskSpace
 from common.kuka import ENV_ID, HARD_ENV_ID
 from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
 from common.kuka.bullet import direct_client, pybullet
-from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 
 TIME_STEP = 1.0 / 240.0
 SOLVER_ITERATIONS = 150
@@ -75,6 +76,9 @@ FAR_CENTRE = (0.532, 0.0)
 """The gripper's x and y at the book's default start pose."""
 FAR_MIN_DISTANCE = 0.16
 """A far block lies at least this far (metres) from ``FAR_CENTRE``; random actions rarely end there."""
+BLOCK_YAW_INDEX = 8
+"""Observation entry of the block's yaw in the gripper's frame: pi/2 (modulo pi) when the fingers,
+which close along the gripper's x, are square to the block's length."""
 FAR_CANDIDATES = 64
 """Uniform draws per far placement, the first far enough is kept (all 64 fail with probability ~1e-12)."""
 
@@ -183,10 +187,12 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._steps += 1
 
         terminated = self._touches_tray()
+        square = True
         if terminated:
+            square = self._fingers_square_to_block()
             self._grasp()
         observation, block_z = self._observe()
-        success = block_z > SUCCESS_BLOCK_Z
+        success = block_z > SUCCESS_BLOCK_Z and square
         shaping = self._distance_weight()
         distance = self._block_to_end_effector_distance() if shaping else 0.0
         reward = (
@@ -265,6 +271,10 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """How far (metres) a full x or y action moves the gripper's target in one step."""
         return MOVE_PER_ACTION
 
+    def _fingers_square_to_block(self) -> bool:
+        """Whether a lift that follows this touch may count: in the book's rule, at any angle."""
+        return True
+
     def _grasp(self) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift."""
         arm, step_simulation = self._arm, self._step_simulation
@@ -322,9 +332,10 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
 class KukaGraspHardEnv(KukaGraspEnv):
     """The grasp at the difficulty of ``KUKA_HARD_TASK_SPACE``: the book's six parameters, then how far
     the block lies from the gripper's start (``obj_far``), how much of the distance shaping the reward
-    keeps (``shaping``) and how far an action moves the gripper (``move_scale``). At ``obj_far`` 0 and
-    ``shaping`` and ``move_scale`` 1 a task plays exactly as in ``KukaGraspEnv``; the default task is
-    the family's hardest.
+    keeps (``shaping``), how far an action moves the gripper (``move_scale``) and how square to the
+    block the fingers must close for a lift to count (``align_margin``). At ``obj_far`` 0, ``shaping``
+    and ``move_scale`` 1 and ``align_margin`` 90 a task plays exactly as in ``KukaGraspEnv``; the
+    default task is the family's hardest.
     """
 
     task_space = KUKA_HARD_TASK_SPACE
@@ -347,6 +358,17 @@ class KukaGraspHardEnv(KukaGraspEnv):
 
     def _move_per_action(self) -> float:
         return MOVE_PER_ACTION * self._task["move_scale"]
+
+    def _fingers_square_to_block(self) -> bool:
+        """The fingers within ``align_margin`` degrees of square to the block as the gripper touches the
+        tray: the scripted grasp closes them where they are, and a wide enough gap rotates the block
+        into them, so without this rule a wrist left to chance grasps as well as one turned on purpose."""
+        margin = self._task["align_margin"]
+        if margin >= ALIGN_MARGIN_ANY:
+            return True
+        block_yaw = float(self._observe()[0][BLOCK_YAW_INDEX])
+        off_square = abs(block_yaw % math.pi - math.pi / 2)
+        return off_square <= math.radians(margin)
 
 
 KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}

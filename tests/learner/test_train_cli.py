@@ -124,11 +124,11 @@ def test_a_run_keeps_its_environment_when_resumed(tmp_path, capsys):
 
 
 def test_the_hard_family_registers_its_own_task_space(tmp_path, capsys):
-    """The teacher sees all nine parameters: a fixed point given in the book's six is refused for lacking the rest."""
+    """The teacher sees all ten parameters: a fixed point given in the book's six is refused for lacking the rest."""
     run_dir = tmp_path / "run"
     book_point = json.dumps(KUKA_TASK_SPACE.hardest())
     flags = ["--env", "KukaGraspHard-v0", "--teacher", "fixed", "--teacher-param", f"point={book_point}"]
     assert main(["train", *flags, "--run-dir", str(run_dir)]) == 2
     error = capsys.readouterr().err
     assert "cannot register curriculum 'run'" in error
-    assert all(name in error for name in ("obj_far", "shaping", "move_scale"))
+    assert all(name in error for name in ("obj_far", "shaping", "move_scale", "align_margin"))

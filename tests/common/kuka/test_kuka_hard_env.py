@@ -1,5 +1,5 @@
 """``KukaGraspHard-v0``: the book's task as one point of it, far placements, fading shaping, a slower gripper,
-its task space."""
+fingers that must close square to the block, its task space."""
 
 from __future__ import annotations
 
@@ -17,11 +17,14 @@ from common.kuka.env import (
     FAR_MIN_DISTANCE,
     FAR_X_RANGE,
     FAR_Y_RANGE,
+    SUCCESS_BLOCK_Z,
     KukaGraspEnv,
     KukaGraspHardEnv,
     make_kuka_env,
 )
 from common.kuka.task_space import (
+    ALIGN_MARGIN_ANY,
+    ALIGN_MARGIN_HARDEST,
     KUKA_HARD_BOOK_HARDEST,
     KUKA_HARD_TASK_SPACE,
     KUKA_TASK_SPACE,
@@ -60,11 +63,16 @@ def test_registered_with_its_own_task_space_and_the_hardest_task_by_default():
         task_space_for("KukaGrasp-v9")
 
 
-def test_the_space_keeps_the_books_six_parameters_and_adds_three():
+def test_the_space_keeps_the_books_six_parameters_and_adds_four():
     assert KUKA_HARD_TASK_SPACE.parameters[:6] == KUKA_TASK_SPACE.parameters
-    assert KUKA_HARD_TASK_SPACE.names[6:] == ("obj_far", "shaping", "move_scale")
-    hardest_new = {"obj_far": 1.0, "shaping": 0.0, "move_scale": MOVE_SCALE_HARDEST}
-    easiest_new = {"obj_far": 0.0, "shaping": 1.0, "move_scale": 1.0}
+    assert KUKA_HARD_TASK_SPACE.names[6:] == ("obj_far", "shaping", "move_scale", "align_margin")
+    hardest_new = {
+        "obj_far": 1.0,
+        "shaping": 0.0,
+        "move_scale": MOVE_SCALE_HARDEST,
+        "align_margin": ALIGN_MARGIN_HARDEST,
+    }
+    easiest_new = {"obj_far": 0.0, "shaping": 1.0, "move_scale": 1.0, "align_margin": ALIGN_MARGIN_ANY}
     assert {**KUKA_TASK_SPACE.hardest(), **hardest_new} == HARDEST
     assert {**KUKA_TASK_SPACE.easiest(), **easiest_new} == EASIEST
     assert {**KUKA_TASK_SPACE.hardest(), **easiest_new} == KUKA_HARD_BOOK_HARDEST
@@ -149,12 +157,38 @@ def test_move_scale_slows_the_grippers_moves_and_nothing_else(env):
 
 
 @pytest.mark.parametrize(
+    ("turn_steps", "margin", "counts"),
+    [
+        (0, ALIGN_MARGIN_HARDEST, True),
+        (2, ALIGN_MARGIN_HARDEST, True),
+        (4, ALIGN_MARGIN_HARDEST, False),
+        (12, ALIGN_MARGIN_HARDEST, False),
+        (4, ALIGN_MARGIN_ANY, True),
+        (12, ALIGN_MARGIN_ANY, True),
+    ],
+)
+def test_a_lift_counts_only_when_the_fingers_closed_within_align_margin_of_square(env, turn_steps, margin, counts):
+    """At the easiest placement the fingers start square to the block; each full wrist action turns them
+    0.05 rad (2.9 degrees). The lift happens either way; whether it counts depends on the margin."""
+    env.reset(seed=0, options={"task": {**EASIEST, "align_margin": margin}})
+    for step in range(1000):
+        turn = 1.0 if step < turn_steps else 0.0
+        _, reward, terminated, truncated, info = env.step(np.array([0.0, 0.0, turn], dtype=np.float32))
+        if terminated or truncated:
+            break
+    assert terminated and env._base_pose(env._block)[0][2] > SUCCESS_BLOCK_Z, "the block was lifted"
+    assert info["is_success"] is counts
+    assert (reward > 9.0) is counts, "the success bonus is paid only when the lift counts"
+
+
+@pytest.mark.parametrize(
     ("make", "bad_task", "named"),
     [
         (KukaGraspHardEnv, {name: value for name, value in HARDEST.items() if name != "shaping"}, "shaping"),
         (KukaGraspHardEnv, {**HARDEST, "obj_far": 1.5}, "obj_far"),
         (KukaGraspHardEnv, {**HARDEST, "shaping": math.nan}, "shaping"),
         (KukaGraspHardEnv, {**HARDEST, "move_scale": 0.05}, "move_scale"),
+        (KukaGraspHardEnv, {**HARDEST, "align_margin": 5.0}, "align_margin"),
         (KukaGraspEnv, HARDEST, "obj_far"),
     ],
 )
