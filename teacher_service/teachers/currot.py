@@ -36,6 +36,13 @@ Where ours differs from the reference, and why:
 When it helps: a student that learns nothing from the hardest tasks but can be led there through
 tasks it already half masters, in spaces where the way to the target is not a straight line;
 unlike SPDL's Gaussian, the particle cloud can take any shape.
+
+When it fails: particles only move toward tasks that did better than others, and tasks stay within
+``noise`` of a particle. If no particle starts where the student earns anything, every result is
+the same and nothing ever moves. On the ALP-GMM paper's toy, where only 1% of the space pays at
+first, 200 uniform particles miss it with probability 0.99^200 (13%): one seed in five mastered
+nothing (BENCHMARKS.md). Start near the easiest task (``start`` = easiest) when the student's
+first successes are known to lie there.
 """
 
 from __future__ import annotations
