@@ -30,7 +30,7 @@ import numpy as np
 
 from common.client.task_space import Task
 from common.kuka import ENV_IDS, HARD_ENV_ID
-from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.env import KukaGraspEnv, make_kuka_env, off_square
 from common.kuka.task_space import ALIGN_MARGIN_HARDEST, KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
 from learner.stats import wilson_interval
 
@@ -58,8 +58,7 @@ def scripted_action(observation: np.ndarray) -> np.ndarray:
     yaw, block_x, block_y, block_yaw = (float(value) for value in observation[5:9])
     cos, sin = math.cos(yaw), math.sin(yaw)
     world_dx, world_dy = cos * block_x + sin * block_y, sin * block_x - cos * block_y
-    misalignment = (block_yaw - math.pi / 2 + math.pi / 2) % math.pi - math.pi / 2
-    action = np.array([SCRIPT_GAIN * world_dx, SCRIPT_GAIN * world_dy, SCRIPT_YAW_GAIN * misalignment])
+    action = np.array([SCRIPT_GAIN * world_dx, SCRIPT_GAIN * world_dy, SCRIPT_YAW_GAIN * off_square(block_yaw)])
     return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 

@@ -88,6 +88,12 @@ CAMERA_YAW = 55.0
 CAMERA_PITCH = -27.0
 
 
+def off_square(block_yaw: float) -> float:
+    """Signed angle (radians, in [-pi/2, pi/2)) by which the fingers are off square to the block, from
+    the block's yaw in the gripper's frame (observation entry ``BLOCK_YAW_INDEX``)."""
+    return block_yaw % math.pi - math.pi / 2
+
+
 class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     """Grasp a block from a tray with a KUKA iiwa arm, at a difficulty set by a curriculum task.
 
@@ -367,8 +373,7 @@ class KukaGraspHardEnv(KukaGraspEnv):
         if margin >= ALIGN_MARGIN_ANY:
             return True
         block_yaw = float(self._observe()[0][BLOCK_YAW_INDEX])
-        off_square = abs(block_yaw % math.pi - math.pi / 2)
-        return off_square <= math.radians(margin)
+        return abs(off_square(block_yaw)) <= math.radians(margin)
 
 
 KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}
