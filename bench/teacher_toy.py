@@ -52,6 +52,7 @@ import itertools
 import json
 import multiprocessing
 import os
+import queue
 import shutil
 import signal
 import statistics
@@ -545,7 +546,13 @@ def execute_in_jobs(
     try:
         running = len(workers)
         while running:
-            kind, value = messages.get()
+            dead = [worker.exitcode for worker in workers if worker.exitcode not in (None, 0)]
+            if dead:
+                raise SystemExit(f"a job died (exit code {dead[0]}) before finishing its runs")
+            try:
+                kind, value = messages.get(timeout=1.0)
+            except queue.Empty:
+                continue
             if kind == "episodes":
                 bar.update(value)
             elif kind == "run":
