@@ -45,11 +45,13 @@ def setting(text: str) -> tuple[str, Any]:
         return name.strip(), value
 
 
-def add_override_flags(group: argparse._ArgumentGroup, scope: str) -> None:
+def add_override_flags(
+    group: argparse._ArgumentGroup, scope: str, teacher_param: str = "a teacher parameter (e.g. fit_rate=100)"
+) -> None:
     """``--teacher-param`` and ``--ppo`` (into ``teacher_params`` and ``ppo``): repeatable NAME=VALUE
-    pairs; ``scope`` ends their help ('for this run', 'for every run')."""
+    pairs; ``scope`` ends their help ('for this run', 'for every run'), ``teacher_param`` starts the first's."""
     for flag, dest, what in (
-        ("--teacher-param", "teacher_params", "a teacher parameter (e.g. fit_rate=100)"),
+        ("--teacher-param", "teacher_params", teacher_param),
         ("--ppo", "ppo", "a PPO hyperparameter, a PPOConfig field in learner/config.py (e.g. entropy_coef=0.001)"),
     ):
         group.add_argument(

@@ -16,18 +16,16 @@ from common.kuka import ENV_IDS
 from learner.arguments import UsageError, add_override_flags, int_at_least, positive_int
 from learner.bakeoff_report import LEARNING_CURVES, RESULTS_JSON, RESULTS_MARKDOWN, write_reports
 from learner.bakeoff_runs import (
-    REPEATED_FLAGS,
     TRAINING_FLAGS,
     RunFailed,
     check_settings,
     evaluate_run,
     plan_runs,
+    teacher_params_by_kind,
     train_runs,
 )
 from learner.bakeoff_statistics import TeacherResult
-from learner.config import LOOPS, TrainConfig
-
-DEFAULT_TEACHERS = ("alp-gmm", "manual", "fixed", "random")
+from learner.config import LOOPS, TEACHERS, TrainConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,10 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--teachers",
         nargs="+",
-        choices=DEFAULT_TEACHERS,
-        default=list(DEFAULT_TEACHERS),
+        choices=TEACHERS,
+        default=list(TEACHERS),
         metavar="TEACHER",
-        help=f"teachers to compare (default: {' '.join(DEFAULT_TEACHERS)})",
+        help=f"teachers to compare (default: every kind, {' '.join(TEACHERS)})",
     )
     parser.add_argument("--seeds", type=positive_int, default=3, help="seeds per teacher: 0, 1, ... (default 3)")
     parser.add_argument(
@@ -105,7 +103,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     training.add_argument(
         "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
     )
-    add_override_flags(training, "for every run")
+    add_override_flags(
+        training,
+        "for every run",
+        teacher_param="a teacher parameter: KIND.NAME=VALUE for one teacher (e.g. currot.start=easiest), "
+        "NAME=VALUE for every teacher compared,",
+    )
     training.add_argument(
         "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"
     )
@@ -125,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
 def _bakeoff(args: argparse.Namespace) -> int:
     teachers = list(dict.fromkeys(args.teachers))
     settings = {name: getattr(args, name) for name in TRAINING_FLAGS} | {"total_steps": args.total_steps}
-    settings |= {name: dict(getattr(args, name)) for name in REPEATED_FLAGS}
-    check_settings(args.out, settings)
+    settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params_by_kind(args.teacher_params, teachers)}
+    settings = check_settings(args.out, settings, teachers)
     runs = plan_runs(args.out, teachers, args.seeds)
     if not train_runs(runs, args.total_steps, settings, args.ray_address):
         return 130

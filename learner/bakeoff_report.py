@@ -15,7 +15,7 @@ from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.bakeoff_runs import learning_curve
-from learner.bakeoff_statistics import CURVE_WINDOW, SUCCESS_TARGET, TeacherResult, median_steps
+from learner.bakeoff_statistics import CURVE_WINDOW, HALF_SUCCESS, SUCCESS_TARGET, TeacherResult, median_steps
 from learner.config import TrainConfig
 from learner.json_file import write_json
 from learner.stats import CONFIDENCE, Interval
@@ -25,6 +25,11 @@ TEACHER_LABELS = {
     "manual": "Manual lesson plan",
     "fixed": "No curriculum: hardest task only",
     "random": "Uniform random tasks",
+    "adr": "ADR",
+    "self-paced": "Self-paced (SPDL)",
+    "currot": "CURROT",
+    "covar-gmm": "Covar-GMM",
+    "riac": "RIAC",
 }
 BOOK_RETURNS = {"alp-gmm": 3.71, "fixed": 2.81, "manual": -2.79}
 """The book's chapter 14: mean scaled return over 100 episodes on the hardest task, one seed, ~1.7M steps."""
@@ -42,6 +47,7 @@ def teacher_record(result: TeacherResult) -> dict[str, Any]:
         "success_rate_over_seeds": result.success_over_seeds.to_dict(),
         "return_over_seeds": result.return_over_seeds.to_dict(),
         "median_steps_to_success": median_steps(result.seed_steps_to_success),
+        "median_steps_to_half_success": median_steps(result.seed_steps_to(HALF_SUCCESS)),
         "return": result.returns.to_dict(),
         "success_rate": result.success_rate.to_dict(),
         "book_return": BOOK_RETURNS.get(result.teacher) if result.env == ENV_ID else None,
@@ -53,9 +59,14 @@ def teacher_record(result: TeacherResult) -> dict[str, Any]:
                 "success_rate": evaluation.success_rate.estimate,
                 "mean_length": evaluation.mean_length,
                 "steps_to_success": steps,
+                "steps_to_half_success": half,
             }
-            for run, evaluation, steps in zip(
-                result.runs, result.evaluations, result.seed_steps_to_success, strict=True
+            for run, evaluation, steps, half in zip(
+                result.runs,
+                result.evaluations,
+                result.seed_steps_to_success,
+                result.seed_steps_to(HALF_SUCCESS),
+                strict=True,
             )
         ],
     }
@@ -78,6 +89,10 @@ def _format_steps(steps: float | None) -> str:
     return "not reached" if steps is None else f"{steps / 1e6:.2f}M"
 
 
+def _format_median_steps(steps: Sequence[int | None]) -> str:
+    return f"{_format_steps(median_steps(steps))} ({', '.join(_format_steps(value) for value in steps)})"
+
+
 def _format_setting(name: str, value: Any) -> str:
     if isinstance(value, dict):
         return f"{name.replace('_', ' ')} " + ", ".join(f"{key}={json.dumps(item)}" for key, item in value.items())
@@ -85,8 +100,9 @@ def _format_setting(name: str, value: Any) -> str:
 
 
 def registration_params(teacher: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """What ``train`` registers the teacher's curriculum with: the KUKA defaults, then the bake-off's overrides."""
-    overrides = settings.get("teacher_params", {})
+    """What ``train`` registers the teacher's curriculum with: the KUKA defaults, then the bake-off's
+    overrides for that teacher."""
+    overrides = settings.get("teacher_params", {}).get(teacher, {})
     return TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=overrides).teacher_params
 
 
@@ -122,22 +138,23 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         "## Between seeds: what a new seed may give",
         "",
         f"| Teacher | Success rate, mean over seeds ({CONFIDENCE:.0%} CI over seeds) | Success per seed "
+        f"| Median steps to {HALF_SUCCESS:.0%} success (per seed) "
         f"| Median steps to {SUCCESS_TARGET:.0%} success (per seed) | Mean return over seeds ({CONFIDENCE:.0%} CI) |",
-        "|---|---|---|---|---|",
+        "|---|---|---|---|---|---|",
     ]
     for result in results:
         success, returns = result.success_over_seeds, result.return_over_seeds
         per_seed = ", ".join(f"{rate:.0%}" for rate in result.seed_success_rates)
-        steps = result.seed_steps_to_success
+        steps = [result.seed_steps_to(target) for target in (HALF_SUCCESS, SUCCESS_TARGET)]
         lines.append(
             f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_interval(success, percent=True)} "
-            f"| {per_seed} | {_format_steps(median_steps(steps))} ({', '.join(_format_steps(v) for v in steps)}) "
+            f"| {per_seed} | {' | '.join(_format_median_steps(each) for each in steps)} "
             f"| {_format_interval(returns)} |"
         )
     lines += [
         "",
         "The interval is a Student-t interval over the per-seed success rates: it says how much a new seed may "
-        f"vary. Steps to {SUCCESS_TARGET:.0%} success: the first step at which {CURVE_WINDOW} consecutive in-run "
+        f"vary. Steps to a success rate: the first step at which {CURVE_WINDOW} consecutive in-run "
         f"evaluations on the hardest task ({settings['curve_episodes']} episodes each, every "
         f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest.",
         "",

@@ -19,15 +19,17 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from tqdm import tqdm
 
+from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
+from learner.config import TrainConfig
 from learner.json_file import write_json
 from learner.metrics import METRICS_FILE
 
@@ -49,8 +51,6 @@ TRAINING_FLAGS = {
     "loop": "--loop",
 }
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
-REPEATED_FLAGS = {"teacher_params": "--teacher-param", "ppo": "--ppo"}
-"""Bake-off options given as NAME=VALUE pairs, handed to every run as one flag per pair."""
 ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID}
 """Settings newer than some stored bake-offs, with the value their runs were trained with."""
 
@@ -83,11 +83,36 @@ def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
     ]
 
 
-def check_settings(out: Path, settings: dict[str, Any]) -> None:
-    """Runs in one directory must share their hyperparameters; only the step budget may grow.
+def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """``--teacher-param`` pairs as each teacher's parameters: ``KIND.NAME`` sets one teacher's, a plain
+    ``NAME`` every teacher's. Each teacher's set, on top of its KUKA defaults, is checked against its
+    kind's model here, so a typo stops the bake-off before its first run rather than in one of them."""
+    from teacher_service.teachers import TEACHER_KINDS
+
+    params: dict[str, dict[str, Any]] = {teacher: {} for teacher in teachers}
+    for target, value in pairs:
+        kind, dot, name = target.rpartition(".")
+        if dot and kind not in params:
+            raise UsageError(f"--teacher-param {target}: {kind!r} is not among the teachers ({', '.join(teachers)})")
+        for teacher in [kind] if dot else teachers:
+            params[teacher][name] = value
+    for teacher, values in params.items():
+        registered = TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=values).teacher_params
+        try:
+            TEACHER_KINDS[teacher].Params.parse(registered)
+        except ValueError as error:
+            raise UsageError(f"--teacher-param for {teacher}: {error}") from None
+    return params
+
+
+def check_settings(out: Path, settings: dict[str, Any], teachers: Sequence[str]) -> dict[str, Any]:
+    """Runs in one directory must share their hyperparameters and each teacher its parameters; only
+    the step budget may grow. Returns the settings to report: these, with the parameters of teachers
+    stored by earlier invocations.
 
     The settings of the first invocation are stored in DIR, and a later invocation that differs is
-    refused instead of silently comparing runs trained differently.
+    refused instead of silently comparing runs trained differently. A teacher that no earlier
+    invocation ran may join with its own parameters.
     """
     path = Path(out) / SETTINGS_FILE
     if path.exists():
@@ -95,8 +120,15 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
         differences = [
             f"{name}: {stored.get(name)!r} before, {value!r} now"
             for name, value in settings.items()
-            if name != "total_steps" and stored.get(name) != value
+            if name not in ("total_steps", "teacher_params") and stored.get(name) != value
         ]
+        stored_params = stored["teacher_params"]
+        differences += [
+            f"{teacher} parameters: {stored_params[teacher]!r} before, {settings['teacher_params'][teacher]!r} now"
+            for teacher in teachers
+            if teacher in stored_params and stored_params[teacher] != settings["teacher_params"][teacher]
+        ]
+        settings = settings | {"teacher_params": stored_params | settings["teacher_params"]}
         if differences:
             raise UsageError(
                 f"{out} holds a bake-off with other training settings ({'; '.join(differences)}); "
@@ -108,6 +140,7 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
                 f"--total-steps {settings['total_steps']:_} would compare them with shorter ones"
             )
     write_json(path, settings)
+    return settings
 
 
 def train_command(
@@ -129,9 +162,10 @@ def train_command(
     ]
     for name, flag in TRAINING_FLAGS.items():
         command += [flag, str(settings[name])]
-    for name, flag in REPEATED_FLAGS.items():
-        for key, value in settings[name].items():
-            command += [flag, f"{key}={json.dumps(value)}"]
+    for key, value in settings["ppo"].items():
+        command += ["--ppo", f"{key}={json.dumps(value)}"]
+    for key, value in settings["teacher_params"].get(run.teacher, {}).items():
+        command += ["--teacher-param", f"{key}={json.dumps(value)}"]
     if ray_address is not None:
         command += ["--ray-address", ray_address]
     return command + (["--resume"] if resume else [])

@@ -18,6 +18,8 @@ from learner.stats import Interval, mean_interval, wilson_interval
 
 SUCCESS_TARGET = 0.8
 """The success rate on the hardest task whose first crossing the report times."""
+HALF_SUCCESS = 0.5
+"""A lower bar the report also times, which a teacher may reach within the budget when 80% is not."""
 CURVE_WINDOW = 3
 """Consecutive in-run evaluations pooled for that reading, so it is not one small evaluation's luck."""
 
@@ -80,4 +82,7 @@ class TeacherResult:
 
     @property
     def seed_steps_to_success(self) -> list[int | None]:
-        return [steps_to_success(run) for run in self.runs]
+        return self.seed_steps_to(SUCCESS_TARGET)
+
+    def seed_steps_to(self, target: float) -> list[int | None]:
+        return [steps_to_success(run, target) for run in self.runs]

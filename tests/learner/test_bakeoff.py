@@ -11,9 +11,10 @@ from common.kuka import HARD_ENV_ID
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
+from learner.arguments import UsageError
 from learner.bakeoff_report import BOOK_RETURNS, results_markdown
-from learner.bakeoff_runs import Run, learning_curve, plan_runs
-from learner.bakeoff_statistics import TeacherResult, median_steps, steps_to_success
+from learner.bakeoff_runs import Run, check_settings, learning_curve, plan_runs, teacher_params_by_kind, train_command
+from learner.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult
 from learner.stats import mean_interval
@@ -80,6 +81,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         success = sum(evaluation["per_episode"]["success"]) / 3
         assert entry["success_rate_over_seeds"] == {"estimate": success, "low": None, "high": None, "samples": 1}
         assert entry["runs"][0]["steps_to_success"] == steps_to_success(run)
+        assert entry["runs"][0]["steps_to_half_success"] == steps_to_success(run, HALF_SUCCESS)
         assert f"(`{run.teacher}`) | {success:.0%} [n/a] | {success:.0%} |" in table
         assert entry["book_return"] == BOOK_RETURNS.get(run.teacher)
         assert f"(`{run.teacher}`) | {returns.estimate:.2f} ± {returns.half_width:.2f} |" in table
@@ -168,3 +170,58 @@ def test_the_report_names_what_each_teacher_was_registered_with(tmp_path):
     registered = next(line for line in report.splitlines() if "registered with" in line)
     assert registered.endswith("defaults: ALP-GMM reward_range=[-5.0, 10.0], target_task_ratio=0.2.")
     assert "hardest task only" not in registered and "teacher params" not in report
+
+    # Each teacher is named with its own parameters, and only its own.
+    settings["teacher_params"] = {"alp-gmm": {"fit_rate": 100}, "fixed": {}}
+    report = results_markdown(results, settings, episodes=1, seed=0)
+    registered = next(line for line in report.splitlines() if "registered with" in line)
+    assert registered.endswith("ALP-GMM reward_range=[-5.0, 10.0], target_task_ratio=0.2, fit_rate=100.")
+
+
+def test_bad_teacher_parameters_stop_the_bakeoff_before_any_run(tmp_path, capsys):
+    for flags, message in [
+        (["--teachers", "fixed", "--teacher-param", "currot.start=easiest"], "'currot' is not among the teachers"),
+        (["--teachers", "adr", "fixed", "--teacher-param", "adr.step=2"], "--teacher-param for adr"),
+        (["--teachers", "riac", "--teacher-param", "fit_rate=100"], "--teacher-param for riac"),
+    ]:
+        assert main(["bakeoff", "--out", str(tmp_path), *flags]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "bakeoff.json").exists()
+
+
+def test_each_teacher_trains_with_its_own_parameters_and_plain_names_reach_every_teacher(tmp_path):
+    pairs = [("currot.start", "easiest"), ("currot.target", "hardest"), ("seed_note", 1), ("adr.step", 0.2)]
+    teachers = ["currot", "adr", "fixed"]
+    with pytest.raises(UsageError, match="(?s)for currot: .*seed_note"):  # no kind takes a seed_note
+        teacher_params_by_kind(pairs, teachers)
+    params = teacher_params_by_kind([pair for pair in pairs if pair[0] != "seed_note"], teachers)
+    assert params == {"currot": {"start": "easiest", "target": "hardest"}, "adr": {"step": 0.2}, "fixed": {}}
+    assert teacher_params_by_kind([("reward_range", [0, 1])], ["adr", "self-paced"]) == {
+        "adr": {"reward_range": [0, 1]},
+        "self-paced": {"reward_range": [0, 1]},
+    }
+
+    settings = {"env": "KukaGraspHard-v0", "ppo": {"update_epochs": 2}, "teacher_params": params} | {
+        name: 1 for name in ("workers", "envs_per_worker", "rollout_length", "max_episode_steps")
+    }
+    settings |= {"checkpoint_every": 1, "curve_every": 1, "curve_episodes": 1, "loop": "sync"}
+    currot, adr, fixed = (Run(teacher, 0, tmp_path / teacher) for teacher in teachers)
+    command = " ".join(train_command(currot, 10, settings, resume=False, ray_address=None))
+    assert '--teacher-param start="easiest" --teacher-param target="hardest"' in command
+    assert "step=" not in command and "--ppo update_epochs=2" in command
+    assert "--teacher-param" not in train_command(fixed, 10, settings, resume=False, ray_address=None)
+
+
+def test_a_teacher_may_join_a_bakeoff_with_its_own_parameters_but_not_change_them(tmp_path):
+    base = {"env": "KukaGraspHard-v0", "ppo": {}, "total_steps": 100}
+    first = check_settings(tmp_path, base | {"teacher_params": {"adr": {"step": 0.2}, "fixed": {}}}, ["adr", "fixed"])
+    assert first["teacher_params"] == {"adr": {"step": 0.2}, "fixed": {}}
+    # A later invocation adds CURROT with its parameters and reruns ADR with the same ones.
+    joined = base | {"teacher_params": {"adr": {"step": 0.2}, "currot": {"start": "easiest"}}}
+    reported = check_settings(tmp_path, joined, ["adr", "currot"])
+    assert reported["teacher_params"] == {"adr": {"step": 0.2}, "fixed": {}, "currot": {"start": "easiest"}}
+    # Runs already trained with the defaults cannot be compared with new ones trained otherwise.
+    with pytest.raises(UsageError, match=r"fixed parameters: \{\} before, \{'point': "):
+        check_settings(tmp_path, base | {"teacher_params": {"fixed": {"point": {}}}}, ["fixed"])
+    with pytest.raises(UsageError, match=r"adr parameters: \{'step': 0.2\} before, \{\} now"):
+        check_settings(tmp_path, base | {"teacher_params": {"adr": {}}}, ["adr"])
