@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Issue 29, part 2: screening teacher parameters on KukaGraspHard-v0 before the bake-off, on the
+# screening seeds (100+) and evaluation episode seeds 20000+, never the bake-off's (training seeds
+# 0 to 4, evaluation seeds 100000+). One run at a time (a run uses both cores).
+#
+# The configurations are the lines of screen-teachers.txt, beside this file: NAME TEACHER STEPS SEED
+# [train flags...]. The file is read again before each run, so lines can be added while this runs;
+# every line ever run stays in it (the record of every configuration tried). A finished run is
+# skipped, an unfinished one resumes from its checkpoint, so running this again carries on.
+# Each finished run's metrics, teacher database and final evaluation are copied to
+# screening/v4-NAME/ beside this file.
+#
+#   mkdir -p runs/hard-screen-v4 && setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v4/teachers.log 2>&1 &
+#
+# Variables: PYTHON (default .venv/bin/python), OUT (default runs/hard-screen-v4).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+PYTHON=${PYTHON:-.venv/bin/python}
+OUT=${OUT:-runs/hard-screen-v4}
+HERE=benchmarks/bakeoff-hard
+LIST=$HERE/screen-teachers.txt
+ENV_ID=KukaGraspHard-v0
+mkdir -p "$OUT"
+
+next_configuration() {  # the first line of the list whose results are not yet copied
+    local name
+    while read -r name rest; do
+        case "$name" in '' | '#'*) continue ;; esac
+        if [ ! -f "$HERE/screening/v4-$name/evaluation-hardest.json" ]; then
+            echo "$name $rest"
+            return
+        fi
+    done < "$LIST"
+}
+
+while line=$(next_configuration) && [ -n "$line" ]; do
+    read -r name teacher steps seed flags <<< "$line"
+    run="$OUT/$name"
+    echo "$(date -u +%FT%TZ) $name: training to $steps steps"
+    # shellcheck disable=SC2086  # the flags are words to split
+    "$PYTHON" -m kuka_curriculum train --env "$ENV_ID" --teacher "$teacher" --seed "$seed" --total-steps "$steps" \
+        --eval-episodes 20 --run-dir "$run" --resume-if-exists $flags >> "$OUT/$name.log" 2>&1
+    json="$run/evaluation-hardest.json"
+    if [ ! -f "$json" ]; then
+        "$PYTHON" -m kuka_curriculum evaluate "$run" --task hardest --episodes 100 --seed 20000 --processes 2 \
+            --json "$json.partial" >> "$OUT/$name.log" 2>&1
+        mv "$json.partial" "$json"
+    fi
+    kept="$HERE/screening/v4-$name"
+    mkdir -p "$kept"
+    cp "$run/metrics.jsonl" "$run/teacher.sqlite" "$kept/"
+    cp "$json" "$kept/"
+    echo "$(date -u +%FT%TZ) $name: $(tail -n 1 "$OUT/$name.log")"
+done
+echo "$(date -u +%FT%TZ) every configuration in $LIST is done"
