@@ -20,6 +20,7 @@ from learner.bakeoff_runs import (
     RunFailed,
     check_settings,
     evaluate_run,
+    further_finished_runs,
     plan_runs,
     teacher_params_by_kind,
     train_runs,
@@ -38,7 +39,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="TEACHER",
         help=f"teachers to compare (default: every kind, {' '.join(TEACHERS)})",
     )
-    parser.add_argument("--seeds", type=positive_int, default=3, help="seeds per teacher: 0, 1, ... (default 3)")
+    parser.add_argument(
+        "--seeds",
+        type=positive_int,
+        default=3,
+        help="seeds per teacher to train: 0, 1, ... (default 3); the report also counts a teacher's further "
+        "seeds that an earlier invocation trained to the budget",
+    )
     parser.add_argument(
         "--total-steps",
         type=positive_int,
@@ -137,6 +144,7 @@ def _bakeoff(args: argparse.Namespace) -> int:
     results = []
     for teacher in teachers:
         teacher_runs = tuple(run for run in runs if run.teacher == teacher)
+        teacher_runs += tuple(further_finished_runs(args.out, teacher, args.seeds, args.total_steps))
         evaluations = []
         for run in teacher_runs:
             evaluation = evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)

@@ -105,6 +105,19 @@ def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[
     return params
 
 
+def further_finished_runs(out: Path, teacher: str, seeds: int, total_steps: int) -> list[Run]:
+    """The teacher's runs in DIR beyond the first ``seeds`` (seeds ``seeds``, ``seeds + 1``, ... up
+    to the first missing one) that reached ``total_steps``: an earlier invocation's extra seeds,
+    which the report counts too, so a teacher rerun with more seeds keeps them in the table."""
+    runs, seed = [], seeds
+    while (directory := Path(out) / RUNS_DIR / f"{teacher}-seed{seed}").is_dir():
+        run = Run(teacher, seed, directory)
+        if run.steps_done() >= total_steps:
+            runs.append(run)
+        seed += 1
+    return runs
+
+
 def check_settings(out: Path, settings: dict[str, Any], teachers: Sequence[str]) -> dict[str, Any]:
     """Runs in one directory must share their hyperparameters and each teacher its parameters; only
     the step budget may grow. Returns the settings to report: these, with the parameters of teachers

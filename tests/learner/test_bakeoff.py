@@ -97,6 +97,17 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert printed.count(f"finished at {2 * BATCH:_} steps, skipped") == 2
     assert {path: path.stat().st_mtime_ns for path in untouched} == untouched
 
+    # One teacher gets more seeds; a later report over every teacher keeps them, and only finished ones.
+    assert bakeoff("--teachers", "fixed", "--seeds", "2", "--total-steps", str(2 * BATCH)) == 0
+    (out / "runs" / "fixed-seed2").mkdir()  # started, never checkpointed: not in the report
+    assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
+    teachers = json.loads((out / "results.json").read_text())["teachers"]
+    assert {entry["teacher"]: [run["seed"] for run in entry["runs"]] for entry in teachers} == {
+        "fixed": [0, 1],
+        "random": [0],
+    }
+    capsys.readouterr()
+
     # Other hyperparameters in the same directory would make an unfair comparison.
     assert bakeoff("--teachers", "fixed", "--total-steps", str(2 * BATCH), "--rollout-length", "64") == 2
     assert "rollout_length: 128 before, 64 now" in capsys.readouterr().err
