@@ -1,7 +1,7 @@
 """The KUKA environments' task spaces.
 
 ``KUKA_TASK_SPACE`` is the book's six-parameter space and ``KUKA_HARD_TASK_SPACE`` the harder family
-of ``KukaGraspHard-v0``: the same six plus three more.
+of ``KukaGraspHard-v0``: the same six plus four more.
 """
 
 from __future__ import annotations
