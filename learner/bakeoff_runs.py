@@ -84,17 +84,19 @@ def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
 
 
 def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[str]) -> dict[str, dict[str, Any]]:
-    """``--teacher-param`` pairs as each teacher's parameters: ``KIND.NAME`` sets one teacher's, a plain
-    ``NAME`` every teacher's. Each teacher's set, on top of its KUKA defaults, is checked against its
-    kind's model here, so a typo stops the bake-off before its first run rather than in one of them."""
+    """``--teacher-param`` pairs as each teacher's parameters: ``KIND.NAME`` sets one teacher's (and
+    is left out when that kind is not among ``teachers``, so one script can name every teacher's
+    parameters and run a few teachers), a plain ``NAME`` every teacher's. Each teacher's set, on top
+    of its KUKA defaults, is checked against its kind's model here, so a typo stops the bake-off
+    before its first run rather than in one of them."""
     from teacher_service.teachers import TEACHER_KINDS
 
     params: dict[str, dict[str, Any]] = {teacher: {} for teacher in teachers}
     for target, value in pairs:
         kind, dot, name = target.rpartition(".")
-        if dot and kind not in params:
-            raise UsageError(f"--teacher-param {target}: {kind!r} is not among the teachers ({', '.join(teachers)})")
-        for teacher in [kind] if dot else teachers:
+        if dot and kind not in TEACHER_KINDS:
+            raise UsageError(f"--teacher-param {target}: no teacher kind {kind!r}; known: {', '.join(TEACHER_KINDS)}")
+        for teacher in ([kind] if kind in params else []) if dot else teachers:
             params[teacher][name] = value
     for teacher, values in params.items():
         registered = TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=values).teacher_params

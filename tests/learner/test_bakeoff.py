@@ -191,11 +191,13 @@ def test_the_report_names_what_each_teacher_was_registered_with(tmp_path):
 
 def test_bad_teacher_parameters_stop_the_bakeoff_before_any_run(tmp_path, capsys):
     for flags, message in [
-        (["--teachers", "fixed", "--teacher-param", "currot.start=easiest"], "'currot' is not among the teachers"),
+        (["--teachers", "fixed", "--teacher-param", "curot.start=easiest"], "no teacher kind 'curot'"),
+        (["--teachers", "currot", "--teacher-param", "currot.start=middle"], "--teacher-param for currot"),
         (["--teachers", "adr", "fixed", "--teacher-param", "adr.step=2"], "--teacher-param for adr"),
         (["--teachers", "riac", "--teacher-param", "fit_rate=100"], "--teacher-param for riac"),
     ]:
-        assert main(["bakeoff", "--out", str(tmp_path), *flags]) == 2
+        # A tiny budget, so that a regression trains for seconds before the test fails, not for hours.
+        assert main(["bakeoff", "--out", str(tmp_path), "--seeds", "1", "--total-steps", "1", *flags]) == 2
         assert message in capsys.readouterr().err
     assert not (tmp_path / "runs").exists() and not (tmp_path / "bakeoff.json").exists()
 
@@ -207,6 +209,8 @@ def test_each_teacher_trains_with_its_own_parameters_and_plain_names_reach_every
         teacher_params_by_kind(pairs, teachers)
     params = teacher_params_by_kind([pair for pair in pairs if pair[0] != "seed_note"], teachers)
     assert params == {"currot": {"start": "easiest", "target": "hardest"}, "adr": {"step": 0.2}, "fixed": {}}
+    # A kind that this invocation does not run keeps its parameters to itself.
+    assert teacher_params_by_kind(pairs[:2], ["fixed"]) == {"fixed": {}}
     assert teacher_params_by_kind([("reward_range", [0, 1])], ["adr", "self-paced"]) == {
         "adr": {"reward_range": [0, 1]},
         "self-paced": {"reward_range": [0, 1]},
