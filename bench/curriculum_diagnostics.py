@@ -311,10 +311,15 @@ def parameter_effects(runs: Sequence[RunData]) -> dict[str, tuple[float, float, 
     ]
     tasks = np.concatenate([tasks for tasks, _ in late])
     success = np.concatenate([success for _, success in late])
+
+    def rate(chosen: np.ndarray) -> float:
+        """NaN for a half the teacher never drew from (CURROT's particles end in one corner)."""
+        return float(success[chosen].mean()) if chosen.any() else float("nan")
+
     effects = {}
     for index, name in enumerate(common_space(runs).names):
         upper = tasks[:, index] >= 0.5
-        effects[name] = (float(success[~upper].mean()), float(success[upper].mean()), len(success))
+        effects[name] = (rate(~upper), rate(upper), len(success))
     return effects
 
 
@@ -382,7 +387,10 @@ def summary_markdown(runs: Sequence[RunData]) -> str:
         "| parameter | lower half | upper half |",
         "|---|---|---|",
     ]
-    lines += [f"| {name} | {low:.0%} | {high:.0%} |" for name, (low, high, _) in effects.items()]
+    lines += [
+        f"| {name} | {' | '.join('—' if np.isnan(rate) else f'{rate:.0%}' for rate in (low, high))} |"
+        for name, (low, high, _) in effects.items()
+    ]
     lines += ["", *placement_markdown(runs)]
     return "\n".join(lines) + "\n"
 

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Issue 29, part 2: every teacher's bake-off on KukaGraspHard-v0 (v4). Resumable: run it again and
+# finished runs are skipped, a started one continues from its latest checkpoint. It writes into
+# benchmarks/bakeoff-hard/bakeoff/, which is committed as runs finish (run `$0 prune` first: it keeps
+# each run's latest checkpoint only), so a later session carries on from what an earlier one landed.
+#
+#   setsid nohup nice -n 10 benchmarks/bakeoff-hard/run.sh > runs/bakeoff-hard.log 2>&1 &
+#
+# Training seeds 0 to 4 and evaluation episode seeds 100000+, never used while screening (seeds
+# 100+, evaluation seeds 20000+: screen-teachers.sh). The teachers' parameters are the ones the
+# screening chose (BENCHMARKS.md, issue 29 part 2); every other setting is the bake-off's default.
+# First 3 seeds of every teacher, then seeds 3 and 4 of no curriculum, ALP-GMM and the best two,
+# then the report over all of them.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+PYTHON=${PYTHON:-.venv/bin/python}
+OUT=benchmarks/bakeoff-hard/bakeoff
+STEPS=${STEPS:-6000000}
+BEST_TWO=${BEST_TWO:-}
+
+if [ "${1:-}" = prune ]; then
+    for checkpoints in "$OUT"/runs/*/checkpoints; do
+        find "$checkpoints" -name 'step_*.pt' | sort | head -n -1 | xargs -r rm --
+    done
+    exit 0
+fi
+
+# Every teacher in one order: the seed-0 runs of all of them come first, so a session that stops
+# early still leaves one run of each.
+TEACHERS=(fixed random manual alp-gmm covar-gmm riac adr self-paced currot)
+bakeoff() {
+    "$PYTHON" -m kuka_curriculum bakeoff --env KukaGraspHard-v0 --total-steps "$STEPS" --curve-episodes 20 \
+        --eval-seed 100000 --out "$OUT" \
+        --teacher-param currot.start=easiest --teacher-param currot.target=hardest \
+        --teacher-param self-paced.kl_limit=1.0 --teacher-param self-paced.update_every=50 \
+        "$@"
+}
+for seeds in 1 2 3; do
+    bakeoff --teachers "${TEACHERS[@]}" --seeds "$seeds"
+done
+if [ -n "$BEST_TWO" ]; then
+    # shellcheck disable=SC2086  # two teacher names
+    bakeoff --teachers fixed alp-gmm $BEST_TWO --seeds 5
+fi
+bakeoff --teachers "${TEACHERS[@]}" --seeds 3
