@@ -20,6 +20,7 @@ BEST_TWO=${BEST_TWO:-}
 
 if [ "${1:-}" = prune ]; then
     for checkpoints in "$OUT"/runs/*/checkpoints; do
+        [ -d "$checkpoints" ] || continue
         find "$checkpoints" -name 'step_*.pt' | sort | head -n -1 | xargs -r rm --
     done
     exit 0
