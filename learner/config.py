@@ -123,9 +123,9 @@ part of the test's range, and without them one seed in three ended under 80% (BE
 @dataclass(frozen=True)
 class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
-    """Curriculum teacher: alp-gmm, manual (the book's lesson plan), random (uniform) or fixed (hardest task)."""
+    """Curriculum teacher, one of ``TEACHERS``: manual is the book's lesson plan, fixed the hardest task alone."""
     env: str = ENV_ID
-    """Task family: KukaGrasp-v0 (the book's six parameters) or KukaGraspHard-v0 (those and two harder ones)."""
+    """Task family: KukaGrasp-v0 (the book's six parameters) or KukaGraspHard-v0 (those and four harder ones)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
     workers: int = 2
