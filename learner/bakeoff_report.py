@@ -15,7 +15,14 @@ from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.bakeoff_runs import learning_curve
-from learner.bakeoff_statistics import CURVE_WINDOW, HALF_SUCCESS, SUCCESS_TARGET, TeacherResult, median_steps
+from learner.bakeoff_statistics import (
+    CURVE_WINDOW,
+    HALF_SUCCESS,
+    STEP_TARGETS,
+    SUCCESS_TARGET,
+    TeacherResult,
+    median_steps,
+)
 from learner.config import TrainConfig
 from learner.json_file import write_json
 from learner.stats import CONFIDENCE, Interval
@@ -145,7 +152,7 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
     for result in results:
         success, returns = result.success_over_seeds, result.return_over_seeds
         per_seed = ", ".join(f"{rate:.0%}" for rate in result.seed_success_rates)
-        steps = [result.seed_steps_to(target) for target in (HALF_SUCCESS, SUCCESS_TARGET)]
+        steps = [result.seed_steps_to(target) for target in STEP_TARGETS]
         lines.append(
             f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_interval(success, percent=True)} "
             f"| {per_seed} | {' | '.join(_format_median_steps(each) for each in steps)} "

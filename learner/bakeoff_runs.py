@@ -65,6 +65,11 @@ class Run:
     seed: int
     directory: Path
 
+    @classmethod
+    def in_bakeoff(cls, out: Path, teacher: str, seed: int) -> Run:
+        """The run of ``teacher`` and ``seed`` in the bake-off directory ``out``."""
+        return cls(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
+
     @property
     def name(self) -> str:
         return self.directory.name
@@ -76,11 +81,7 @@ class Run:
 
 
 def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
-    return [
-        Run(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
-        for teacher in teachers
-        for seed in range(seeds)
-    ]
+    return [Run.in_bakeoff(out, teacher, seed) for teacher in teachers for seed in range(seeds)]
 
 
 def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[str]) -> dict[str, dict[str, Any]]:
@@ -112,8 +113,7 @@ def further_finished_runs(out: Path, teacher: str, seeds: int, total_steps: int)
     to the first missing one) that reached ``total_steps``: an earlier invocation's extra seeds,
     which the report counts too, so a teacher rerun with more seeds keeps them in the table."""
     runs, seed = [], seeds
-    while (directory := Path(out) / RUNS_DIR / f"{teacher}-seed{seed}").is_dir():
-        run = Run(teacher, seed, directory)
+    while (run := Run.in_bakeoff(out, teacher, seed)).directory.is_dir():
         if run.steps_done() >= total_steps:
             runs.append(run)
         seed += 1

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -20,6 +21,8 @@ SUCCESS_TARGET = 0.8
 """The success rate on the hardest task whose first crossing the report times."""
 HALF_SUCCESS = 0.5
 """A lower bar the report also times, which a teacher may reach within the budget when 80% is not."""
+STEP_TARGETS = (HALF_SUCCESS, SUCCESS_TARGET)
+"""The success rates whose first crossing the report times."""
 CURVE_WINDOW = 3
 """Consecutive in-run evaluations pooled for that reading, so it is not one small evaluation's luck."""
 
@@ -80,9 +83,16 @@ class TeacherResult:
     def return_over_seeds(self) -> Interval:
         return mean_interval(self.seed_returns)
 
+    @cached_property
+    def _seed_steps(self) -> dict[float, list[int | None]]:
+        """Per timed success rate, each seed's steps to it: read from the metrics logs once, as the
+        report asks for them in both its files."""
+        return {target: [steps_to_success(run, target) for run in self.runs] for target in STEP_TARGETS}
+
     @property
     def seed_steps_to_success(self) -> list[int | None]:
         return self.seed_steps_to(SUCCESS_TARGET)
 
     def seed_steps_to(self, target: float) -> list[int | None]:
-        return [steps_to_success(run, target) for run in self.runs]
+        """Each seed's steps to ``target``, one of ``STEP_TARGETS``."""
+        return self._seed_steps[target]
