@@ -2,8 +2,8 @@
 
 The command trains every teacher x seed as its own ``train`` run (``bakeoff_runs``: resumable at
 every point, so running the same command again carries on after Ctrl-C or a crash), evaluates each
-final policy on the hardest task, sums the runs up per teacher (``bakeoff_statistics``) and writes
-the results (``bakeoff_report``).
+final policy on the hardest task as soon as that run is trained, sums the runs up per teacher
+(``bakeoff_statistics``) and writes the results (``bakeoff_report``).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from learner.arguments import UsageError, add_override_flags, int_at_least, posi
 from learner.bakeoff_report import LEARNING_CURVES, RESULTS_JSON, RESULTS_MARKDOWN, write_reports
 from learner.bakeoff_runs import (
     TRAINING_FLAGS,
+    Run,
     RunFailed,
     check_settings,
     evaluate_run,
@@ -26,6 +27,7 @@ from learner.bakeoff_runs import (
     train_runs,
 )
 from learner.bakeoff_statistics import TeacherResult
+from learner.checkpoint_evaluation import EvaluationResult
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
 
@@ -138,19 +140,22 @@ def _bakeoff(args: argparse.Namespace) -> int:
     settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params_by_kind(args.teacher_params, teachers)}
     settings = check_settings(args.out, settings, teachers)
     runs = plan_runs(args.out, teachers, args.seeds)
-    if not train_runs(runs, args.total_steps, settings, args.ray_address):
+
+    def evaluate(run: Run) -> EvaluationResult:
+        return evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
+
+    if not train_runs(runs, args.total_steps, settings, args.ray_address, lambda run: evaluate(run).summary()):
         return 130
 
     results = []
     for teacher in teachers:
-        teacher_runs = tuple(run for run in runs if run.teacher == teacher)
-        teacher_runs += tuple(further_finished_runs(args.out, teacher, args.seeds, args.total_steps))
-        evaluations = []
-        for run in teacher_runs:
-            evaluation = evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
-            print(f"{run.name}: {evaluation.summary()}")
-            evaluations.append(evaluation)
-        results.append(TeacherResult(teacher, teacher_runs, tuple(evaluations), args.env))
+        further = tuple(further_finished_runs(args.out, teacher, args.seeds, args.total_steps))
+        for run in further:
+            print(f"{run.name}: {evaluate(run).summary()}")
+        teacher_runs = tuple(run for run in runs if run.teacher == teacher) + further
+        # Every run was evaluated above; these come from each run's cache.
+        evaluations = tuple(evaluate(run) for run in teacher_runs)
+        results.append(TeacherResult(teacher, teacher_runs, evaluations, args.env))
     write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed)
     for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES):
         print(args.out / name)

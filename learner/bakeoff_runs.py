@@ -16,7 +16,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -253,9 +253,20 @@ def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_
     return True
 
 
-def train_runs(runs: Sequence[Run], total_steps: int, settings: dict[str, Any], ray_address: str | None) -> bool:
+def train_runs(
+    runs: Sequence[Run],
+    total_steps: int,
+    settings: dict[str, Any],
+    ray_address: str | None,
+    on_finished: Callable[[Run], str],
+) -> bool:
     """Bring every run to ``total_steps``, one after the other: finished runs are skipped, started ones
-    resumed from their checkpoint. False when interrupted (Ctrl-C); the same call later carries on."""
+    resumed from their checkpoint. False when interrupted (Ctrl-C); the same call later carries on.
+
+    ``on_finished`` sees each run as soon as it reaches the budget (the final evaluation, which
+    then lands in the run's directory hours before the bake-off ends) and its line is written
+    under the progress bar.
+    """
     done = {run.name: run.steps_done() for run in runs}
 
     def counted(run: Run) -> int:
@@ -270,6 +281,7 @@ def train_runs(runs: Sequence[Run], total_steps: int, settings: dict[str, Any], 
         for run in runs:
             if done[run.name] >= total_steps:
                 progress.write(f"{run.name}: finished at {done[run.name]:_} steps, skipped")
+                progress.write(f"{run.name}: {on_finished(run)}")
                 continue
             resume = done[run.name] > 0
             if resume:
@@ -287,6 +299,7 @@ def train_runs(runs: Sequence[Run], total_steps: int, settings: dict[str, Any], 
                 progress.write("interrupted; run the same command again to resume")
                 return False
             done[run.name] = run.steps_done()
+            progress.write(f"{run.name}: {on_finished(run)}")
     return True
 
 

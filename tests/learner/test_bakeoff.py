@@ -61,6 +61,10 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
     printed = capsys.readouterr().out
     assert f"fixed-seed0: resuming at {BATCH:_}" in printed and "random-seed0: training" in printed
+    # Each run is evaluated as soon as it is trained, before the next one starts.
+    assert printed.index("fixed-seed0: hardest task") < printed.index("random-seed0: training")
+    first_random_checkpoint = min(path.stat().st_mtime_ns for path in (random.directory / "checkpoints").iterdir())
+    assert (fixed.directory / "evaluation.json").stat().st_mtime_ns < first_random_checkpoint
     assert f"at step {BATCH:_}" in (fixed.directory / "train.log").read_text()
     for run in (fixed, random):
         checkpoint = load_checkpoint(latest_checkpoint(run.directory))
