@@ -5,6 +5,8 @@
 # each run's latest checkpoint only), so a later session carries on from what an earlier one landed.
 #
 #   setsid nohup nice -n 10 benchmarks/bakeoff-hard/run.sh > runs/bakeoff-hard.log 2>&1 &
+#   benchmarks/bakeoff-hard/run.sh prune          # before committing runs
+#   benchmarks/bakeoff-hard/run.sh diagnostics    # where each teacher spent its steps, finished runs so far
 #
 # Training seeds 0 to 4 and evaluation episode seeds 100000+, never used while screening (seeds
 # 100+, evaluation seeds 20000+: screen-teachers.sh). The teachers' parameters are the ones the
@@ -18,6 +20,22 @@ OUT=benchmarks/bakeoff-hard/bakeoff
 STEPS=${STEPS:-6000000}
 BEST_TWO=${BEST_TWO:-}
 
+TEACHERS=(fixed currot self-paced alp-gmm adr manual random covar-gmm riac)
+
+if [ "${1:-}" = diagnostics ]; then
+    # Where each teacher spent its steps, over its finished (evaluated) runs so far:
+    # benchmarks/bakeoff-hard/diagnostics/<teacher>/ (summary.md and the plot).
+    for teacher in "${TEACHERS[@]}"; do
+        finished=()
+        for evaluation in "$OUT"/runs/"$teacher"-seed*/evaluation.json; do
+            [ -f "$evaluation" ] && finished+=("$(dirname "$evaluation")")
+        done
+        [ ${#finished[@]} -gt 0 ] || continue
+        "$PYTHON" bench/curriculum_diagnostics.py --out "benchmarks/bakeoff-hard/diagnostics/$teacher" "${finished[@]}"
+    done
+    exit 0
+fi
+
 if [ "${1:-}" = prune ]; then
     for checkpoints in "$OUT"/runs/*/checkpoints; do
         [ -d "$checkpoints" ] || continue
@@ -28,8 +46,7 @@ fi
 
 # Every teacher in one order: the seed-0 runs of all of them come first, so a session that stops
 # early still leaves one run of each; no curriculum and the teachers that did best in the screening
-# lead, so the comparison that matters most lands first.
-TEACHERS=(fixed currot self-paced alp-gmm adr manual random covar-gmm riac)
+# lead, so the comparison that matters most lands first (TEACHERS, above).
 bakeoff() {
     "$PYTHON" -m kuka_curriculum bakeoff --env KukaGraspHard-v0 --total-steps "$STEPS" --curve-episodes 20 \
         --eval-seed 100000 --out "$OUT" \
