@@ -73,4 +73,8 @@ class TeacherStatus:
             return f"teacher answered HTTP {error.status}"
         self._down_since = None
         counters = info.counters
-        return f"{info.config.teacher}: {counters.results_received:_} results, {counters.fits_completed} fits"
+        summary = f"{info.config.teacher}: {counters.results_received:_} results"
+        # Teachers without model fits (random, ADR, self-paced, CURROT, ...) would only ever show "0 fits".
+        if counters.fits_completed or counters.fits_pending:
+            summary += f", {counters.fits_completed} fits"
+        return summary

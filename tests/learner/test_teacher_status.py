@@ -67,10 +67,24 @@ def test_the_status_follows_a_teacher_that_goes_down_and_comes_back(tmp_path):
             client.register("random", KUKA_TASK_SPACE)
             client.report(client.next_task(), reward=1.0)
         with TeacherStatus(service.url, "run", interval_s=INTERVAL_S, timeout_s=TIMEOUT_S) as status:
-            _read(status, 5 * TIMEOUT_S, until=lambda text: text == "random: 1 results, 0 fits")
+            _read(status, 5 * TIMEOUT_S, until=lambda text: text == "random: 1 results")
             service.kill()
             _, slowest = _read(status, 5 * TIMEOUT_S, until=lambda text: "unreachable since" in text)
             service.start()
             back, slowest_back = _read(status, 5 * TIMEOUT_S, until=lambda text: text.startswith("random:"))
     assert max(slowest, slowest_back) < INSTANT_S
-    assert back[-1] == "random: 1 results, 0 fits"
+    assert back[-1] == "random: 1 results"
+
+
+def test_the_status_counts_fits_only_for_a_teacher_that_fits(tmp_path):
+    with ServiceProcess(tmp_path / "teacher.db") as service:
+        with TeacherClient(service.url, "run") as client:
+            client.register("alp-gmm", KUKA_TASK_SPACE, {"fit_rate": 2, "min_components": 1, "max_components": 1})
+            for reward in (0.0, 1.0, 0.5, 2.0):
+                client.report(client.next_task(), reward=reward)
+        with TeacherStatus(service.url, "run", interval_s=INTERVAL_S, timeout_s=TIMEOUT_S) as status:
+            _read(
+                status,
+                30 * TIMEOUT_S,
+                until=lambda text: text.startswith("alp-gmm: 4 results, ") and "0 fits" not in text,
+            )
