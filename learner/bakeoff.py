@@ -9,6 +9,7 @@ final policy on the hardest task as soon as that run is trained, sums the runs u
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -141,7 +142,9 @@ def _bakeoff(args: argparse.Namespace) -> int:
     settings = check_settings(args.out, settings, teachers)
     runs = plan_runs(args.out, teachers, args.seeds)
 
+    @functools.cache
     def evaluate(run: Run) -> EvaluationResult:
+        """Each run's final evaluation, computed (or read from its cache file) once per invocation."""
         return evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
 
     if not train_runs(runs, args.total_steps, settings, args.ray_address, lambda run: evaluate(run).summary()):
@@ -153,7 +156,6 @@ def _bakeoff(args: argparse.Namespace) -> int:
         for run in further:
             print(f"{run.name}: {evaluate(run).summary()}")
         teacher_runs = tuple(run for run in runs if run.teacher == teacher) + further
-        # Every run was evaluated above; these come from each run's cache.
         evaluations = tuple(evaluate(run) for run in teacher_runs)
         results.append(TeacherResult(teacher, teacher_runs, evaluations, args.env))
     write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed)

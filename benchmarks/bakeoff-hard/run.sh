@@ -20,6 +20,9 @@ OUT=benchmarks/bakeoff-hard/bakeoff
 STEPS=${STEPS:-6000000}
 BEST_TWO=${BEST_TWO:-}
 
+# Every teacher in one order: the seed-0 runs of all of them come first, so a session that stops
+# early still leaves one run of each; no curriculum and the teachers that did best in the screening
+# lead, so the comparison that matters most lands first.
 TEACHERS=(fixed currot self-paced alp-gmm adr manual random covar-gmm riac)
 
 if [ "${1:-}" = diagnostics ]; then
@@ -44,9 +47,6 @@ if [ "${1:-}" = prune ]; then
     exit 0
 fi
 
-# Every teacher in one order: the seed-0 runs of all of them come first, so a session that stops
-# early still leaves one run of each; no curriculum and the teachers that did best in the screening
-# lead, so the comparison that matters most lands first (TEACHERS, above).
 bakeoff() {
     "$PYTHON" -m kuka_curriculum bakeoff --env KukaGraspHard-v0 --total-steps "$STEPS" --curve-episodes 20 \
         --eval-seed 100000 --out "$OUT" \
