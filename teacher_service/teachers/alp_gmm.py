@@ -329,12 +329,67 @@ class MixtureSampler:
         return features
 
 
-class AlpGmmTeacher(Teacher):
+class MixtureTeacher(Teacher):
+    """What the two Gaussian-mixture teachers share: a fit is a ``MixtureFit`` over the task
+    features and ``extra_coordinates`` more (ALP; or time and reward), and the newest one installed
+    is turned by ``_prepare`` into the sampler that draws tasks."""
+
+    extra_coordinates: int
+
+    def __init__(self, space: TaskSpace, seed: int, params: TeacherParams | Mapping[str, Any] | None = None) -> None:
+        super().__init__(space, seed, params)
+        self._width = len(space) + self.extra_coordinates
+        self._sampler: MixtureSampler | None = None
+        self.fits_requested = 0
+        self.fits_installed = 0
+
+    def _prepare(self, fit: MixtureFit) -> MixtureSampler:
+        """The sampler for ``fit``: how this teacher scores its components."""
+        raise NotImplementedError
+
+    def install(self, fitted: MixtureFit) -> None:
+        if not isinstance(fitted, MixtureFit):
+            raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
+        if self._sampler is not None and fitted.index <= self._sampler.fit.index:
+            raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
+        self._sampler = self._prepare(fitted)
+        self.fits_installed += 1
+
+    def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
+        return {
+            "index": fitted.index,
+            "weights": fitted.weights.tolist(),
+            "means": fitted.means.tolist(),
+            "covariances": fitted.covariances.tolist(),
+            "aic_by_components": [[k, aic] for k, aic in fitted.aic_by_components.items()],
+        }
+
+    def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
+        return MixtureFit.from_data(data, self._width)
+
+    def _export_fits(self) -> dict[str, Any]:
+        """The fit counters and the installed model, for a snapshot."""
+        return {
+            "fits_requested": self.fits_requested,
+            "fits_installed": self.fits_installed,
+            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
+        }
+
+    def _import_fits(self, state: Mapping[str, Any]) -> None:
+        """Read back what ``_export_fits`` wrote."""
+        self.fits_requested = int(state["fits_requested"])
+        self.fits_installed = int(state["fits_installed"])
+        model = state["model"]
+        self._sampler = None if model is None else self._prepare(self.import_fit(model))
+
+
+class AlpGmmTeacher(MixtureTeacher):
     """Absolute-learning-progress teacher over a Gaussian mixture (see the module docstring)."""
 
     kind = "alp-gmm"
     Params = AlpGmmParams
     params: AlpGmmParams
+    extra_coordinates = 1
 
     def __init__(self, space: TaskSpace, seed: int, params: AlpGmmParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -351,9 +406,6 @@ class AlpGmmTeacher(Teacher):
             except ValueError as error:
                 raise ValueError(f"target_task_ratio needs a hardest value for every parameter: {error}") from None
         self._history = _History(len(space), self.params.buffer_size, self.params.history_window)
-        self._sampler: MixtureSampler | None = None
-        self.fits_requested = 0
-        self.fits_installed = 0
         self.origins: Counter[str] = Counter(gmm=0, uniform=0)
         self._recent_origins: deque[str] = deque(maxlen=RECENT_ORIGINS)
 
@@ -417,26 +469,6 @@ class AlpGmmTeacher(Teacher):
             raise TypeError(f"expected the tree a BuildJob returns, got {type(output).__name__}")
         self._history.adopt(job, output)
 
-    def install(self, fitted: MixtureFit) -> None:
-        if not isinstance(fitted, MixtureFit):
-            raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
-        if self._sampler is not None and fitted.index <= self._sampler.fit.index:
-            raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
-        self._sampler = self._prepare(fitted)
-        self.fits_installed += 1
-
-    def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
-        return {
-            "index": fitted.index,
-            "weights": fitted.weights.tolist(),
-            "means": fitted.means.tolist(),
-            "covariances": fitted.covariances.tolist(),
-            "aic_by_components": [[k, aic] for k, aic in fitted.aic_by_components.items()],
-        }
-
-    def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
-        return MixtureFit.from_data(data, len(self.space) + 1)
-
     def _prepare(self, fit: MixtureFit) -> MixtureSampler:
         """Components picked by their mean ALP (the last coordinate), clipped at 0."""
         return MixtureSampler.prepare(fit, np.clip(fit.means[:, -1], 0.0, None), len(self.space))
@@ -450,18 +482,14 @@ class AlpGmmTeacher(Teacher):
         return {
             "history_rows": self._history.size,
             "history_from": self._history.kept_from,
-            "fits_requested": self.fits_requested,
-            "fits_installed": self.fits_installed,
-            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
+            **self._export_fits(),
             "origins": dict(self.origins),
             "recent_origins": list(self._recent_origins),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         self._history.restore(history, int(state.get("history_from", 0)), int(state["history_rows"]))
-        self.fits_requested = int(state["fits_requested"])
-        self.fits_installed = int(state["fits_installed"])
-        self._sampler = None if state["model"] is None else self._prepare(self.import_fit(state["model"]))
+        self._import_fits(state)
         self.origins = Counter({str(origin): int(count) for origin, count in state["origins"].items()})
         self._recent_origins.extend(str(origin) for origin in state["recent_origins"])
 

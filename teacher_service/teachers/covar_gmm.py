@@ -36,9 +36,10 @@ from teacher_service.teachers.alp_gmm import (
     MAX_FIT_RATE,
     MixtureFit,
     MixtureSampler,
+    MixtureTeacher,
     fit_mixture,
 )
-from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
+from teacher_service.teachers.base import EpisodeResult, FitJob
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.row_log import RowLog
@@ -80,20 +81,17 @@ class CovarGmmParams(TeacherParams):
         return self
 
 
-class CovarGmmTeacher(Teacher):
+class CovarGmmTeacher(MixtureTeacher):
     """Time-reward covariance teacher over a Gaussian mixture (see the module docstring)."""
 
     kind = "covar-gmm"
     Params = CovarGmmParams
     params: CovarGmmParams
+    extra_coordinates = 2
 
     def __init__(self, space: TaskSpace, seed: int, params: CovarGmmParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
-        self._width = len(space) + 2
         self._log = RowLog(self._width, 2 * self.params.fit_rate)
-        self._sampler: MixtureSampler | None = None
-        self.fits_requested = 0
-        self.fits_installed = 0
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         dims = len(self.space)
@@ -131,26 +129,6 @@ class CovarGmmTeacher(Teacher):
         )
         return FitJob(index=index, run=run)
 
-    def install(self, fitted: MixtureFit) -> None:
-        if not isinstance(fitted, MixtureFit):
-            raise TypeError(f"expected the MixtureFit returned by a FitJob, got {type(fitted).__name__}")
-        if self._sampler is not None and fitted.index <= self._sampler.fit.index:
-            raise ValueError(f"fit {fitted.index} is stale: fit {self._sampler.fit.index} is installed")
-        self._sampler = self._prepare(fitted)
-        self.fits_installed += 1
-
-    def export_fit(self, fitted: MixtureFit) -> dict[str, Any]:
-        return {
-            "index": fitted.index,
-            "weights": fitted.weights.tolist(),
-            "means": fitted.means.tolist(),
-            "covariances": fitted.covariances.tolist(),
-            "aic_by_components": [[k, aic] for k, aic in fitted.aic_by_components.items()],
-        }
-
-    def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
-        return MixtureFit.from_data(data, self._width)
-
     def _prepare(self, fit: MixtureFit) -> MixtureSampler:
         """Components picked by their time-reward covariance: its positive part, or its size with
         ``absolute_progress``."""
@@ -166,18 +144,13 @@ class CovarGmmTeacher(Teacher):
         return {
             "history_rows": self._log.size,
             "history_from": self._log.needed_from,
-            "fits_requested": self.fits_requested,
-            "fits_installed": self.fits_installed,
-            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
+            **self._export_fits(),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         first = int(state.get("history_from", 0))
         self._log.load(history, first, int(state["history_rows"]))
-        self.fits_requested = int(state["fits_requested"])
-        self.fits_installed = int(state["fits_installed"])
-        model = state["model"]
-        self._sampler = None if model is None else self._prepare(self.import_fit(model))
+        self._import_fits(state)
 
     def _to_features(self, tasks: np.ndarray) -> np.ndarray:
         return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)
