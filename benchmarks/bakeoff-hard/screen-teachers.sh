@@ -21,6 +21,8 @@ HERE=benchmarks/bakeoff-hard
 LIST=$HERE/screen-teachers.txt
 ENV_ID=KukaGraspHard-v0
 mkdir -p "$OUT"
+# shellcheck source=benchmarks/bakeoff-hard/screen-steps.sh
+source "$HERE/screen-steps.sh"
 
 next_configuration() {  # the first line of the list whose results are not yet copied
     local name
@@ -35,21 +37,11 @@ next_configuration() {  # the first line of the list whose results are not yet c
 
 while line=$(next_configuration) && [ -n "$line" ]; do
     read -r name teacher steps seed flags <<< "$line"
-    run="$OUT/$name"
-    echo "$(date -u +%FT%TZ) $name: training to $steps steps"
     # shellcheck disable=SC2086  # the flags are words to split
-    "$PYTHON" -m kuka_curriculum train --env "$ENV_ID" --teacher "$teacher" --seed "$seed" --total-steps "$steps" \
-        --eval-episodes 20 --run-dir "$run" --resume-if-exists $flags >> "$OUT/$name.log" 2>&1
-    json="$run/evaluation-hardest.json"
-    if [ ! -f "$json" ]; then
-        "$PYTHON" -m kuka_curriculum evaluate "$run" --task hardest --episodes 100 --seed 20000 --processes 2 \
-            --json "$json.partial" >> "$OUT/$name.log" 2>&1
-        mv "$json.partial" "$json"
-    fi
+    train "$name" "$teacher" "$steps" "$seed" $flags
+    evaluate "$name" hardest
     kept="$HERE/screening/v4-$name"
     mkdir -p "$kept"
-    cp "$run/metrics.jsonl" "$run/teacher.sqlite" "$kept/"
-    cp "$json" "$kept/"
-    echo "$(date -u +%FT%TZ) $name: $(tail -n 1 "$OUT/$name.log")"
+    cp "$OUT/$name/metrics.jsonl" "$OUT/$name/teacher.sqlite" "$OUT/$name/evaluation-hardest.json" "$kept/"
 done
 echo "$(date -u +%FT%TZ) every configuration in $LIST is done"

@@ -17,24 +17,8 @@ ENV_ID=KukaGraspHard-v0
 EASIEST='{"rnd_obj_x":0,"rnd_obj_y":0,"rnd_obj_ang":0,"jp2":1.3,"jp4":-1.0,"bias_obj_y":0.04,"obj_far":0,"shaping":1,"move_scale":1,"align_margin":90}'
 mkdir -p "$OUT"
 
-train() {  # NAME TEACHER STEPS SEED [extra train flags...]
-    local name=$1 teacher=$2 steps=$3 seed=$4
-    shift 4
-    echo "$(date -u +%FT%TZ) $name: training to $steps steps"
-    "$PYTHON" -m kuka_curriculum train --env "$ENV_ID" --teacher "$teacher" --seed "$seed" --total-steps "$steps" \
-        --eval-episodes 20 --run-dir "$OUT/$name" --resume-if-exists "$@" >> "$OUT/$name.log" 2>&1
-    echo "$(date -u +%FT%TZ) $name: done"
-}
-
-evaluate() {  # NAME TASK: the final policy on 100 episodes of a task, once
-    local name=$1 task=$2 json="$OUT/$1/evaluation-$2.json"
-    if [ ! -f "$json" ]; then
-        "$PYTHON" -m kuka_curriculum evaluate "$OUT/$name" --task "$task" --episodes 100 --seed 20000 --processes 2 \
-            --json "$json.partial" >> "$OUT/$name.log" 2>&1
-        mv "$json.partial" "$json"
-    fi
-    echo "$(date -u +%FT%TZ) $name: $(tail -n 1 "$OUT/$name.log")"
-}
+# shellcheck source=benchmarks/bakeoff-hard/screen-steps.sh
+source benchmarks/bakeoff-hard/screen-steps.sh
 
 train fixed-hardest-seed100 fixed 3000000 100
 train easiest-seed100 fixed 150000 100 --teacher-param "point=$EASIEST"
