@@ -28,6 +28,7 @@ from typing import Annotated, Any, cast
 import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
+from typing_extensions import Self
 
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
@@ -36,9 +37,9 @@ from teacher_service.teachers.params import FiniteFloat, TeacherParams
 from teacher_service.teachers.row_log import RowLog
 
 MIN_HISTORY_FOR_ALP = 6
+"""ALP is 0 until this many earlier tasks exist, as in the reference code."""
 MAX_HISTORY_WINDOW = 1_000_000
 """At 9 columns for the KUKA space, about 150 MB a curriculum at most (the rows, and room to grow)."""
-"""ALP is 0 until this many earlier tasks exist, as in the reference code."""
 
 RECENT_ORIGINS = 1000
 """How many recent tasks' origins (GMM or uniform) the state reports."""
@@ -50,19 +51,38 @@ MAX_EM_INITS = 5
 """Together these bound one fit: at most 2,000 points, 16 candidate sizes, 5 EM restarts each."""
 
 
-class AlpGmmParams(TeacherParams):
+class MixtureParams(TeacherParams):
+    """What the two Gaussian-mixture teachers share: how often they fit and what each fit tries."""
+
     fit_rate: int = Field(default=250, ge=2, le=MAX_FIT_RATE)
     """Results between two mixture fits; the first ``fit_rate`` tasks are uniform (bootstrap)."""
     random_task_ratio: float = Field(default=0.2, ge=0.0, le=1.0)
     """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
-    target_task_ratio: float = Field(default=0.0, ge=0.0, le=1.0)
-    """Share of tasks that are the space's hardest task (the test), bootstrap included; the rest as above."""
     min_components: int = Field(default=2, ge=1, le=MAX_COMPONENTS)
     """Fewest Gaussians tried per fit."""
     max_components: int = Field(default=10, ge=1, le=MAX_COMPONENTS)
     """Most Gaussians tried per fit; the candidate with the lowest AIC wins."""
     nb_em_init: int = Field(default=1, ge=1, le=MAX_EM_INITS)
     """EM restarts per candidate mixture."""
+
+    @model_validator(mode="after")
+    def _components_fit(self) -> Self:
+        if self.min_components > self.max_components:
+            raise ValueError(
+                f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
+            )
+        if self.max_components > self.fit_rate:
+            raise ValueError(
+                f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
+                "each fit sees fit_rate points"
+            )
+        return self
+
+
+class AlpGmmParams(MixtureParams):
+    target_task_ratio: float = Field(default=0.0, ge=0.0, le=1.0)
+    """Share of tasks that are the space's hardest task (the test), bootstrap included; the rest as
+    ``random_task_ratio`` says."""
     buffer_size: int = Field(default=500, ge=1, le=10_000)
     """Newest tasks scanned directly before joining the k-d tree that answers nearest-neighbour
     queries; affects speed only."""
@@ -81,19 +101,10 @@ class AlpGmmParams(TeacherParams):
 
     @model_validator(mode="after")
     def _consistent(self) -> AlpGmmParams:
-        if self.min_components > self.max_components:
-            raise ValueError(
-                f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
-            )
         if self.target_task_ratio + self.random_task_ratio > 1.0:
             raise ValueError(
                 f"target_task_ratio ({self.target_task_ratio}) and random_task_ratio ({self.random_task_ratio}) "
                 "cannot add up to more than 1"
-            )
-        if self.max_components > self.fit_rate:
-            raise ValueError(
-                f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
-                "each fit sees fit_rate points"
             )
         if self.reward_range is not None and not self.reward_range[0] < self.reward_range[1]:
             raise ValueError(f"reward_range must have low < high, got {self.reward_range}")
@@ -334,9 +345,10 @@ class MixtureTeacher(Teacher):
     features and ``extra_coordinates`` more (ALP; or time and reward), and the newest one installed
     is turned by ``_prepare`` into the sampler that draws tasks."""
 
+    params: MixtureParams
     extra_coordinates: int
 
-    def __init__(self, space: TaskSpace, seed: int, params: TeacherParams | Mapping[str, Any] | None = None) -> None:
+    def __init__(self, space: TaskSpace, seed: int, params: MixtureParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         self._width = len(space) + self.extra_coordinates
         self._sampler: MixtureSampler | None = None
@@ -346,6 +358,25 @@ class MixtureTeacher(Teacher):
     def _prepare(self, fit: MixtureFit) -> MixtureSampler:
         """The sampler for ``fit``: how this teacher scores its components."""
         raise NotImplementedError
+
+    def _fit_points(self, start: int, stop: int) -> np.ndarray:
+        """The rows of results ``start`` to ``stop`` (exclusive) that a fit sees."""
+        raise NotImplementedError
+
+    def refit_job(self, index: int) -> FitJob:
+        """Fit ``index`` sees batch ``index``: the ``fit_rate`` results before it fell due."""
+        if not 0 <= index < self.fits_requested:
+            raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
+        rate = self.params.fit_rate
+        run = functools.partial(
+            fit_mixture,
+            index,
+            self._fit_points(index * rate, (index + 1) * rate),
+            range(self.params.min_components, self.params.max_components + 1),
+            self.params.nb_em_init,
+            indexed_seed(self.seed, FIT_STREAM, index),
+        )
+        return FitJob(index=index, run=run)
 
     def install(self, fitted: MixtureFit) -> None:
         if not isinstance(fitted, MixtureFit):
@@ -446,20 +477,9 @@ class AlpGmmTeacher(MixtureTeacher):
         self.fits_requested += 1
         return self.refit_job(self.fits_requested - 1)
 
-    def refit_job(self, index: int) -> FitJob:
-        """Fit ``index`` sees the ``fit_rate`` results before it fell due, all still in the history."""
-        if not 0 <= index < self.fits_requested:
-            raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
-        rate = self.params.fit_rate
-        run = functools.partial(
-            fit_mixture,
-            index,
-            self._history.fit_points(index * rate, (index + 1) * rate),
-            range(self.params.min_components, self.params.max_components + 1),
-            self.params.nb_em_init,
-            indexed_seed(self.seed, FIT_STREAM, index),
-        )
-        return FitJob(index=index, run=run)
+    def _fit_points(self, start: int, stop: int) -> np.ndarray:
+        """Task features and ALP, all still in the history."""
+        return self._history.fit_points(start, stop)
 
     def build_job(self) -> BuildJob | None:
         return self._history.pending_build()

@@ -22,26 +22,22 @@ reward moves within a few hundred episodes.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.alp_gmm import (
-    MAX_COMPONENTS,
-    MAX_EM_INITS,
     MAX_FIT_RATE,
     MixtureFit,
+    MixtureParams,
     MixtureSampler,
     MixtureTeacher,
-    fit_mixture,
 )
 from teacher_service.teachers.base import EpisodeResult, FitJob
-from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
-from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.row_log import RowLog
 
 REFIT_ROWS = 10_000
@@ -50,35 +46,14 @@ REFIT_BATCHES = 8
 the last REFIT_BATCHES batches, or REFIT_ROWS results if more, stay in memory for that."""
 
 
-class CovarGmmParams(TeacherParams):
+class CovarGmmParams(MixtureParams):
     fit_rate: int = Field(default=250, ge=4, le=MAX_FIT_RATE)
     """Results per batch: a mixture is fitted to each batch; the first ``fit_rate`` tasks are uniform."""
-    random_task_ratio: float = Field(default=0.2, ge=0.0, le=1.0)
-    """Share of tasks drawn uniformly after the bootstrap, so new progress niches are still found."""
-    min_components: int = Field(default=2, ge=1, le=MAX_COMPONENTS)
-    """Fewest Gaussians tried per fit."""
-    max_components: int = Field(default=10, ge=1, le=MAX_COMPONENTS)
-    """Most Gaussians tried per fit; the candidate with the lowest AIC wins."""
-    nb_em_init: int = Field(default=1, ge=1, le=MAX_EM_INITS)
-    """EM restarts per candidate mixture."""
     absolute_progress: bool = False
     """Pick components by the absolute time-reward covariance (progress or forgetting) instead of its
     positive part (progress only, the reference's default)."""
     rescale_tasks: bool = True
     """Fit mixtures on tasks rescaled to [0, 1] per dimension."""
-
-    @model_validator(mode="after")
-    def _consistent(self) -> CovarGmmParams:
-        if self.min_components > self.max_components:
-            raise ValueError(
-                f"min_components ({self.min_components}) cannot exceed max_components ({self.max_components})"
-            )
-        if self.max_components > self.fit_rate:
-            raise ValueError(
-                f"max_components ({self.max_components}) cannot exceed fit_rate ({self.fit_rate}): "
-                "each fit sees fit_rate points"
-            )
-        return self
 
 
 class CovarGmmTeacher(MixtureTeacher):
@@ -114,20 +89,10 @@ class CovarGmmTeacher(MixtureTeacher):
         self.fits_requested += 1
         return self.refit_job(self.fits_requested - 1)
 
-    def refit_job(self, index: int) -> FitJob:
-        """Fit ``index`` sees batch ``index``: the ``fit_rate`` results before it fell due."""
-        if not 0 <= index < self.fits_requested:
-            raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
-        rate = self.params.fit_rate
-        run = functools.partial(
-            fit_mixture,
-            index,
-            self._log.view(index * rate, (index + 1) * rate).copy(),
-            range(self.params.min_components, self.params.max_components + 1),
-            self.params.nb_em_init,
-            indexed_seed(self.seed, FIT_STREAM, index),
-        )
-        return FitJob(index=index, run=run)
+    def _fit_points(self, start: int, stop: int) -> np.ndarray:
+        """Task features, time in the batch and reward, copied for the fit job to own."""
+        points: np.ndarray = self._log.view(start, stop).copy()
+        return points
 
     def _prepare(self, fit: MixtureFit) -> MixtureSampler:
         """Components picked by their time-reward covariance: its positive part, or its size with
