@@ -1,5 +1,5 @@
 """The bake-off's report: ``results.json`` (every figure, per seed included), ``results.md`` (the
-tables a person reads) and ``learning_curves.png`` (hardest-task evaluations during training).
+tables a person reads) and ``learning_curves.png`` (hardest-task success during training).
 """
 
 from __future__ import annotations
@@ -195,45 +195,58 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
 
 
 def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
-    """Success rate and return on the hardest task during training: the mean over seeds, with a band
-    from the worst to the best seed, one line per teacher."""
+    """Hardest-task success during training. On top every teacher's mean over seeds, to compare
+    them; below, one panel per teacher with each seed, to show the spread the means hide (with nine
+    teachers, bands of seeds laid over each other could not be read)."""
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(12, 5), layout="constrained")
-    panels = figure.subplots(1, 2)
-    for axes, metric, label in zip(
-        panels, ("eval/success_rate", "eval/return"), ("success rate", "mean return"), strict=True
-    ):
-        plotted = False
-        for result in results:
-            curves = [learning_curve(run, metric) for run in result.runs]
-            common_steps = sorted(set.intersection(*(set(curve) for curve in curves)))
-            if not common_steps:
-                continue
-            values = np.array([[curve[step] for step in common_steps] for curve in curves])
-            name = f"{TEACHER_LABELS[result.teacher]} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
-            (line,) = axes.plot(common_steps, values.mean(axis=0), label=name)
-            if len(curves) > 1:
-                axes.fill_between(
-                    common_steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.2
-                )
-            plotted = True
-        if plotted:
-            axes.legend(loc="best")
-        else:
-            axes.text(
-                0.5,
-                0.5,
-                "no evaluations were logged during training (--curve-every 0?)",
-                ha="center",
-                va="center",
-                transform=axes.transAxes,
-            )
+    curves_by_teacher = [
+        (result, [learning_curve(run, "eval/success_rate") for run in result.runs]) for result in results
+    ]
+    columns = min(3, max(1, len(results)))
+    rows = -(-len(results) // columns)
+    figure = Figure(figsize=(4.2 * columns + 2.5, 3.6 + 2.4 * rows), layout="constrained")
+    grid = figure.add_gridspec(1 + rows, columns, height_ratios=[1.5] + [1.0] * rows)
+    overview = figure.add_subplot(grid[0, :])
+    panels = [figure.add_subplot(grid[1 + index // columns, index % columns]) for index in range(len(results))]
+    plotted = False
+    for (result, curves), axes in zip(curves_by_teacher, panels, strict=True):
+        label = TEACHER_LABELS[result.teacher]
+        common_steps = sorted(set.intersection(*(set(curve) for curve in curves)))
+        if not common_steps:
+            axes.set_title(f"{label}: no evaluations", fontsize="small")
+            continue
+        mean = np.array([[curve[step] for step in common_steps] for curve in curves]).mean(axis=0)
+        (line,) = overview.plot(
+            common_steps, mean, label=f"{label} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
+        )
+        for curve in curves:
+            steps = sorted(curve)
+            axes.plot(steps, [curve[step] for step in steps], color=line.get_color(), alpha=0.35, linewidth=0.9)
+        axes.plot(common_steps, mean, color=line.get_color(), linewidth=1.8)
+        seeds = f"{len(curves)} seeds, mean in bold" if len(curves) > 1 else "1 seed"
+        axes.set_title(f"{label} ({seeds})", fontsize="small")
+        plotted = True
+    if plotted:
+        overview.legend(loc="center left", bbox_to_anchor=(1.01, 0.5))
+    else:
+        overview.text(
+            0.5,
+            0.5,
+            "no evaluations were logged during training (--curve-every 0?)",
+            ha="center",
+            va="center",
+            transform=overview.transAxes,
+        )
+    overview.set_title("Mean over seeds, every teacher")
+    for index, axes in enumerate([overview, *panels]):
+        axes.set_ylim(-0.03, 1.03)
         axes.set_xlabel("environment steps")
-        axes.set_ylabel(f"{label} on the hardest task")
+        if index == 0 or (index - 1) % columns == 0:
+            axes.set_ylabel("hardest-task success")
         axes.grid(alpha=0.3)
-    figure.suptitle("Hardest-task evaluations during training (band: worst to best seed)")
-    figure.savefig(path, dpi=120)
+    figure.suptitle("Hardest-task success during training (in-run evaluations)")
+    figure.savefig(path, dpi=110)
 
 
 def write_reports(
