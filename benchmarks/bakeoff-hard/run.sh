@@ -11,8 +11,8 @@
 # Training seeds 0 to 4 and evaluation episode seeds 100000+, never used while screening (seeds
 # 100+, evaluation seeds 20000+: screen-teachers.sh). The teachers' parameters are the ones the
 # screening chose (BENCHMARKS.md, issue 29 part 2); every other setting is the bake-off's default.
-# First 3 seeds of every teacher, then seeds 3 and 4 of no curriculum, ALP-GMM and the best two,
-# then the report over all of them.
+# Seed 0 of every teacher, all 5 seeds of no curriculum, seeds 1 and 2 of every teacher, then seeds
+# 3 and 4 of ALP-GMM and the best two, then the report over all of them.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
@@ -54,7 +54,12 @@ bakeoff() {
         --teacher-param self-paced.kl_limit=1.0 --teacher-param self-paced.update_every=50 \
         "$@"
 }
-for seeds in 1 2 3; do
+bakeoff --teachers "${TEACHERS[@]}" --seeds 1
+# No curriculum's five seeds before the other rounds: its seed 1 learnt the hardest point alone (77%),
+# so whether it stays under the issue's 20% over 5 seeds at this budget decides whether the
+# remaining rounds run on this task at all (a no-curriculum run is also the cheapest, about 20 min).
+bakeoff --teachers fixed --seeds 5
+for seeds in 2 3; do
     bakeoff --teachers "${TEACHERS[@]}" --seeds "$seeds"
 done
 if [ -n "$BEST_TWO" ]; then
