@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
+from abc import abstractmethod
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -355,13 +356,13 @@ class MixtureTeacher(Teacher):
         self.fits_requested = 0
         self.fits_installed = 0
 
+    @abstractmethod
     def _prepare(self, fit: MixtureFit) -> MixtureSampler:
         """The sampler for ``fit``: how this teacher scores its components."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _fit_points(self, start: int, stop: int) -> np.ndarray:
         """The rows of results ``start`` to ``stop`` (exclusive) that a fit sees."""
-        raise NotImplementedError
 
     def refit_job(self, index: int) -> FitJob:
         """Fit ``index`` sees batch ``index``: the ``fit_rate`` results before it fell due."""
