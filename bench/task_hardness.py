@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from common.client.task_space import Task
-from common.kuka import ENV_IDS, HARD_ENV_ID
+from common.kuka import ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.env import KukaGraspEnv, make_kuka_env, off_square
-from common.kuka.task_space import ALIGN_MARGIN_HARDEST, KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
+from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
 from learner.stats import wilson_interval
 
 POLICIES = ("zero", "random", "drift", "scripted")
@@ -107,14 +107,15 @@ def points(env_id: str) -> dict[str, Task]:
         named[f"all {share:.0%} of the way"] = {
             name: easiest[name] + share * (hardest[name] - easiest[name]) for name in space.names
         }
-    if env_id == HARD_ENV_ID:
+    if env_id in (HARD_ENV_ID, HARD_V1_ENV_ID):
         book = KUKA_HARD_BOOK_HARDEST
         named["book's hardest"] = book
         for share in (0.5, 1.0):
             named[f"book's hardest, obj_far={share:g}"] = {**book, "obj_far": share}
         for scale in (0.5, MOVE_SCALE_HARDEST):
             named[f"book's hardest, move_scale={scale:g}"] = {**book, "move_scale": scale}
-        named[f"book's hardest, align_margin={ALIGN_MARGIN_HARDEST:g}"] = {**book, "align_margin": ALIGN_MARGIN_HARDEST}
+        margin = hardest["align_margin"]
+        named[f"book's hardest, align_margin={margin:g}"] = {**book, "align_margin": margin}
     named["hardest"] = hardest
     return named
 

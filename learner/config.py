@@ -125,7 +125,7 @@ class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
     """Curriculum teacher, one of ``TEACHERS``: manual is the book's lesson plan, fixed the hardest task alone."""
     env: str = ENV_ID
-    """Task family: KukaGrasp-v0 (the book's six parameters) or KukaGraspHard-v0 (those and four harder ones)."""
+    """Task family: KukaGrasp-v0 (the book's), KukaGraspHard-v0 (ten parameters) or -v1 (v0, hardest margin 2°)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
     workers: int = 2

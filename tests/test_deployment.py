@@ -397,7 +397,7 @@ def test_env_file_drives_the_training_run(
 ) -> None:
     chosen = {
         "TEACHER": "manual",
-        "KUKA_ENV": "KukaGraspHard-v0",
+        "KUKA_ENV": "KukaGraspHard-v1",
         "TOTAL_STEPS": "12345",
         "ROLLOUT_WORKERS": "6",
         "ENVS_PER_WORKER": "3",
@@ -410,7 +410,7 @@ def test_env_file_drives_the_training_run(
     train = parse_kuka_curriculum(command_of(load_compose(env_file)["services"]["learner"], "kuka-curriculum", "train"))
     assert (train.teacher, train.env, train.total_steps, train.workers, train.envs_per_worker, train.seed) == (
         "manual",
-        "KukaGraspHard-v0",
+        "KukaGraspHard-v1",
         12345,
         6,
         3,

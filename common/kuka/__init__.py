@@ -1,7 +1,8 @@
 """The simulated KUKA grasp environments: the arm, the physics helpers, the task spaces and the demo.
 
-Importing ``common.kuka`` registers ``KukaGrasp-v0`` (the book's task) and ``KukaGraspHard-v0`` (a
-harder family around it) with gymnasium; pybullet loads only when an environment is made.
+Importing ``common.kuka`` registers ``KukaGrasp-v0`` (the book's task), ``KukaGraspHard-v0`` (a
+harder family around it) and ``KukaGraspHard-v1`` (the same family with a tighter hardest alignment
+margin) with gymnasium; pybullet loads only when an environment is made.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ import gymnasium
 
 ENV_ID = "KukaGrasp-v0"
 HARD_ENV_ID = "KukaGraspHard-v0"
-ENV_IDS = (ENV_ID, HARD_ENV_ID)
+HARD_V1_ENV_ID = "KukaGraspHard-v1"
+ENV_IDS = (ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID)
 
 
 def _grasp_env(**kwargs: Any) -> gymnasium.Env[Any, Any]:
@@ -27,6 +29,16 @@ def _hard_grasp_env(**kwargs: Any) -> gymnasium.Env[Any, Any]:
     return KukaGraspHardEnv(**kwargs)
 
 
-for _env_id, _entry_point in ((ENV_ID, _grasp_env), (HARD_ENV_ID, _hard_grasp_env)):
+def _hard_v1_grasp_env(**kwargs: Any) -> gymnasium.Env[Any, Any]:
+    from common.kuka.env import KukaGraspHardV1Env
+
+    return KukaGraspHardV1Env(**kwargs)
+
+
+for _env_id, _entry_point in (
+    (ENV_ID, _grasp_env),
+    (HARD_ENV_ID, _hard_grasp_env),
+    (HARD_V1_ENV_ID, _hard_v1_grasp_env),
+):
     if _env_id not in gymnasium.registry:
         gymnasium.register(id=_env_id, entry_point=_entry_point)

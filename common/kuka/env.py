@@ -14,7 +14,8 @@ of reloading every model (tens of milliseconds), with the same trajectories.
 book's hardest task needs no curriculum: four more parameters move the block far from where the
 gripper starts, fade out the reward's distance shaping, slow the gripper's x/y moves and count a lift
 only when the fingers closed square to the block, so that actions without a purpose no longer grasp
-it (``common.kuka.task_space.KUKA_HARD_TASK_SPACE``).
+it (``common.kuka.task_space.KUKA_HARD_TASK_SPACE``). ``KukaGraspHard-v1`` (``KukaGraspHardV1Env``) plays
+by the same rules over a space whose hardest alignment margin is tighter.
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ import pybullet_data
 from gymnasium import spaces
 
 from common.client.task_space import Task, TaskSpace
-from common.kuka import ENV_ID, HARD_ENV_ID
+from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
 from common.kuka.bullet import direct_client, pybullet
-from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 
 TIME_STEP = 1.0 / 240.0
 SOLVER_ITERATIONS = 150
@@ -193,9 +194,11 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._steps += 1
 
         terminated = self._touches_tray()
-        square = True
+        square, info = True, dict[str, float]()
         if terminated:
-            square = self._fingers_square_to_block()
+            off_square_degrees = self._off_square_degrees()
+            square = off_square_degrees <= self._align_margin()
+            info["off_square_degrees"] = off_square_degrees
             self._grasp()
         observation, block_z = self._observe()
         success = block_z > SUCCESS_BLOCK_Z and square
@@ -205,7 +208,7 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             -DISTANCE_PENALTY * shaping * distance + SUCCESS_BONUS * success - ROTATION_PENALTY * abs(dyaw)
         ) * REWARD_SCALE
         truncated = not terminated and self._steps >= self.max_steps
-        return observation, reward, terminated, truncated, {"is_success": success}
+        return observation, reward, terminated, truncated, {"is_success": success, **info}
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]  # gymnasium types it with an unbound TypeVar
         if self.render_mode != "rgb_array":
@@ -277,9 +280,16 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """How far (metres) a full x or y action moves the gripper's target in one step."""
         return MOVE_PER_ACTION
 
-    def _fingers_square_to_block(self) -> bool:
-        """Whether a lift that follows this touch may count: in the book's rule, at any angle."""
-        return True
+    def _align_margin(self) -> float:
+        """Degrees from square within which the fingers must touch down for a lift to count: in the book's
+        rule, any angle."""
+        return ALIGN_MARGIN_ANY
+
+    def _off_square_degrees(self) -> float:
+        """How far (degrees, 0 to 90) the fingers are from square to the block now. The step's ``info``
+        reports it at touchdown, so a measurement can ask how many lifts a tighter margin would count."""
+        block_yaw = float(self._observe()[0][BLOCK_YAW_INDEX])
+        return abs(math.degrees(off_square(block_yaw)))
 
     def _grasp(self) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift."""
@@ -365,18 +375,25 @@ class KukaGraspHardEnv(KukaGraspEnv):
     def _move_per_action(self) -> float:
         return MOVE_PER_ACTION * self._task["move_scale"]
 
-    def _fingers_square_to_block(self) -> bool:
-        """The fingers within ``align_margin`` degrees of square to the block as the gripper touches the
-        tray: the scripted grasp closes them where they are, and a wide enough gap rotates the block
-        into them, so without this rule a wrist left to chance grasps as well as one turned on purpose."""
-        margin = self._task["align_margin"]
-        if margin >= ALIGN_MARGIN_ANY:
-            return True
-        block_yaw = float(self._observe()[0][BLOCK_YAW_INDEX])
-        return abs(off_square(block_yaw)) <= math.radians(margin)
+    def _align_margin(self) -> float:
+        """The task's ``align_margin``: the scripted grasp closes the fingers where they are, and a wide
+        enough gap rotates the block into them, so without this rule a wrist left to chance grasps as
+        well as one turned on purpose."""
+        return self._task["align_margin"]
 
 
-KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {ENV_ID: KukaGraspEnv, HARD_ENV_ID: KukaGraspHardEnv}
+class KukaGraspHardV1Env(KukaGraspHardEnv):
+    """``KukaGraspHard-v1``: the same rules as ``KukaGraspHardEnv``, over ``KUKA_HARD_V1_TASK_SPACE``, whose
+    hardest point closes the fingers within 2 degrees of square instead of 8."""
+
+    task_space = KUKA_HARD_V1_TASK_SPACE
+
+
+KUKA_ENVS: dict[str, type[KukaGraspEnv]] = {
+    ENV_ID: KukaGraspEnv,
+    HARD_ENV_ID: KukaGraspHardEnv,
+    HARD_V1_ENV_ID: KukaGraspHardV1Env,
+}
 """The environment class of each registered id."""
 
 

@@ -1,5 +1,6 @@
 """``KukaGraspHard-v0``: the book's task as one point of it, far placements, fading shaping, a slower gripper,
-fingers that must close square to the block, its task space."""
+fingers that must close square to the block, its task space; ``KukaGraspHard-v1``, the same family with a
+tighter hardest alignment margin."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from test_kuka_env import random_actions, rollout
 
-from common.kuka import ENV_ID, HARD_ENV_ID
+from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.env import (
     FAR_CENTRE,
     FAR_MIN_DISTANCE,
@@ -20,13 +21,16 @@ from common.kuka.env import (
     SUCCESS_BLOCK_Z,
     KukaGraspEnv,
     KukaGraspHardEnv,
+    KukaGraspHardV1Env,
     make_kuka_env,
 )
 from common.kuka.task_space import (
     ALIGN_MARGIN_ANY,
     ALIGN_MARGIN_HARDEST,
+    ALIGN_MARGIN_HARDEST_V1,
     KUKA_HARD_BOOK_HARDEST,
     KUKA_HARD_TASK_SPACE,
+    KUKA_HARD_V1_TASK_SPACE,
     KUKA_TASK_SPACE,
     MOVE_SCALE_HARDEST,
     task_space_for,
@@ -61,6 +65,23 @@ def test_registered_with_its_own_task_space_and_the_hardest_task_by_default():
         make_kuka_env("KukaGrasp-v9")
     with pytest.raises(ValueError, match="unknown environment"):
         task_space_for("KukaGrasp-v9")
+
+
+def test_v1_is_the_same_family_with_only_the_hardest_alignment_margin_tighter():
+    made = gymnasium.make(HARD_V1_ENV_ID, max_steps=5)
+    assert type(made.unwrapped) is KukaGraspHardV1Env and isinstance(made.unwrapped, KukaGraspHardEnv)
+    _, info = made.reset(seed=0)
+    assert info["task"] == KUKA_HARD_V1_TASK_SPACE.hardest()
+    made.close()
+    check_env(gymnasium.make(HARD_V1_ENV_ID).unwrapped)
+    assert task_space_for(HARD_V1_ENV_ID) is KUKA_HARD_V1_TASK_SPACE
+    assert type(make_kuka_env(HARD_V1_ENV_ID, max_steps=3)) is KukaGraspHardV1Env
+    assert KUKA_HARD_V1_TASK_SPACE.parameters[:-1] == KUKA_HARD_TASK_SPACE.parameters[:-1]
+    assert KUKA_HARD_V1_TASK_SPACE.easiest() == EASIEST
+    assert KUKA_HARD_V1_TASK_SPACE.hardest() == {**HARDEST, "align_margin": ALIGN_MARGIN_HARDEST_V1}
+    assert ALIGN_MARGIN_HARDEST_V1 < ALIGN_MARGIN_HARDEST
+    margin = KUKA_HARD_V1_TASK_SPACE.parameters[-1]
+    assert (margin.name, margin.low, margin.high) == ("align_margin", ALIGN_MARGIN_HARDEST_V1, ALIGN_MARGIN_ANY)
 
 
 def test_the_space_keeps_the_books_six_parameters_and_adds_four():
@@ -157,19 +178,24 @@ def test_move_scale_slows_the_grippers_moves_and_nothing_else(env):
 
 
 @pytest.mark.parametrize(
-    ("turn_steps", "margin", "counts"),
+    ("env_id", "turn_steps", "margin", "counts"),
     [
-        (0, ALIGN_MARGIN_HARDEST, True),
-        (2, ALIGN_MARGIN_HARDEST, True),
-        (4, ALIGN_MARGIN_HARDEST, False),
-        (12, ALIGN_MARGIN_HARDEST, False),
-        (4, ALIGN_MARGIN_ANY, True),
-        (12, ALIGN_MARGIN_ANY, True),
+        (HARD_ENV_ID, 0, ALIGN_MARGIN_HARDEST, True),
+        (HARD_ENV_ID, 2, ALIGN_MARGIN_HARDEST, True),
+        (HARD_ENV_ID, 4, ALIGN_MARGIN_HARDEST, False),
+        (HARD_ENV_ID, 12, ALIGN_MARGIN_HARDEST, False),
+        (HARD_ENV_ID, 4, ALIGN_MARGIN_ANY, True),
+        (HARD_ENV_ID, 12, ALIGN_MARGIN_ANY, True),
+        (HARD_V1_ENV_ID, 0, ALIGN_MARGIN_HARDEST_V1, True),
+        (HARD_V1_ENV_ID, 1, ALIGN_MARGIN_HARDEST_V1, False),
+        (HARD_V1_ENV_ID, 1, ALIGN_MARGIN_HARDEST, True),
     ],
 )
-def test_a_lift_counts_only_when_the_fingers_closed_within_align_margin_of_square(env, turn_steps, margin, counts):
+def test_a_lift_counts_only_when_the_fingers_closed_within_align_margin_of_square(env_id, turn_steps, margin, counts):
     """At the easiest placement the fingers start square to the block; each full wrist action turns them
-    0.05 rad (2.9 degrees). The lift happens either way; whether it counts depends on the margin."""
+    0.05 rad (2.9 degrees), which the touchdown's ``info`` reports. The lift happens either way; whether it
+    counts depends on the margin."""
+    env = make_kuka_env(env_id)
     env.reset(seed=0, options={"task": {**EASIEST, "align_margin": margin}})
     for step in range(1000):
         turn = 1.0 if step < turn_steps else 0.0
@@ -179,6 +205,8 @@ def test_a_lift_counts_only_when_the_fingers_closed_within_align_margin_of_squar
     assert terminated and env._base_pose(env._block)[0][2] > SUCCESS_BLOCK_Z, "the block was lifted"
     assert info["is_success"] is counts
     assert (reward > 9.0) is counts, "the success bonus is paid only when the lift counts"
+    assert info["off_square_degrees"] == pytest.approx(turn_steps * math.degrees(0.05), abs=0.3)
+    env.close()
 
 
 @pytest.mark.parametrize(
@@ -189,6 +217,7 @@ def test_a_lift_counts_only_when_the_fingers_closed_within_align_margin_of_squar
         (KukaGraspHardEnv, {**HARDEST, "shaping": math.nan}, "shaping"),
         (KukaGraspHardEnv, {**HARDEST, "move_scale": 0.05}, "move_scale"),
         (KukaGraspHardEnv, {**HARDEST, "align_margin": 5.0}, "align_margin"),
+        (KukaGraspHardV1Env, {**HARDEST, "align_margin": 1.0}, "align_margin"),
         (KukaGraspEnv, HARDEST, "obj_far"),
     ],
 )
