@@ -1,25 +1,30 @@
 #!/usr/bin/env bash
-# Issue 29, part 2: screening teacher parameters on KukaGraspHard-v0 before the bake-off, on the
+# Issue 29, part 2: screening no curriculum and teacher parameters on a hard family before the bake-off, on the
 # screening seeds (100+) and evaluation episode seeds 20000+, never the bake-off's (training seeds
 # 0 to 4, evaluation seeds 100000+). One run at a time (a run uses both cores).
 #
-# The configurations are the lines of screen-teachers.txt, beside this file: NAME TEACHER STEPS SEED
-# [train flags...]. The file is read again before each run, so lines can be added while this runs;
-# every line ever run stays in it (the record of every configuration tried). A finished run is
+# The configurations are the lines of a list beside this file: NAME TEACHER STEPS SEED [train flags...];
+# screen-teachers.txt for KukaGraspHard-v0 (its design v4), screen-hard-v1.txt for KukaGraspHard-v1.
+# The list is read again before each run, so lines can be added while this runs; every line ever run stays in it (the record of every configuration tried). A finished run is
 # skipped, an unfinished one resumes from its checkpoint, so running this again carries on.
 # Each finished run's metrics, teacher database and final evaluation are copied to
-# screening/v4-NAME/ beside this file.
+# screening/v4-NAME/ (v0) or screening/hard-v1-NAME/ (v1) beside this file.
 #
 #   mkdir -p runs/hard-screen-v4 && setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v4/teachers.log 2>&1 &
+#   mkdir -p runs/hard-screen-v1 && ENV_ID=KukaGraspHard-v1 setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v1/teachers.log 2>&1 &
 #
-# Variables: PYTHON (default .venv/bin/python), OUT (default runs/hard-screen-v4).
+# Variables: ENV_ID (KukaGraspHard-v0, the default, or KukaGraspHard-v1), PYTHON (default .venv/bin/python),
+# OUT (default runs/hard-screen-v4 or runs/hard-screen-v1).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
-OUT=${OUT:-runs/hard-screen-v4}
 HERE=benchmarks/bakeoff-hard
-LIST=$HERE/screen-teachers.txt
-ENV_ID=KukaGraspHard-v0
+ENV_ID=${ENV_ID:-KukaGraspHard-v0}
+case "$ENV_ID" in
+    KukaGraspHard-v0) LIST=$HERE/screen-teachers.txt PREFIX=v4 OUT=${OUT:-runs/hard-screen-v4} ;;
+    KukaGraspHard-v1) LIST=$HERE/screen-hard-v1.txt PREFIX=hard-v1 OUT=${OUT:-runs/hard-screen-v1} ;;
+    *) echo "ENV_ID must be KukaGraspHard-v0 or KukaGraspHard-v1, got $ENV_ID" >&2 && exit 2 ;;
+esac
 mkdir -p "$OUT"
 # shellcheck source=benchmarks/bakeoff-hard/screen-steps.sh
 source "$HERE/screen-steps.sh"
@@ -28,7 +33,7 @@ next_configuration() {  # the first line of the list whose results are not yet c
     local name
     while read -r name rest; do
         case "$name" in '' | '#'*) continue ;; esac
-        if [ ! -f "$HERE/screening/v4-$name/evaluation-hardest.json" ]; then
+        if [ ! -f "$HERE/screening/$PREFIX-$name/evaluation-hardest.json" ]; then
             echo "$name $rest"
             return
         fi
@@ -40,7 +45,7 @@ while line=$(next_configuration) && [ -n "$line" ]; do
     # shellcheck disable=SC2086  # the flags are words to split
     train "$name" "$teacher" "$steps" "$seed" $flags
     evaluate "$name" hardest
-    kept="$HERE/screening/v4-$name"
+    kept="$HERE/screening/$PREFIX-$name"
     mkdir -p "$kept"
     cp "$OUT/$name/metrics.jsonl" "$OUT/$name/teacher.sqlite" "$OUT/$name/evaluation-hardest.json" "$kept/"
 done
