@@ -194,7 +194,8 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._steps += 1
 
         terminated = self._touches_tray()
-        square, info = True, dict[str, float]()
+        square = True
+        info: dict[str, float] = {}
         if terminated:
             off_square_degrees = self._off_square_degrees()
             square = off_square_degrees <= self._align_margin()

@@ -2,8 +2,8 @@
 
 ``KUKA_TASK_SPACE`` is the book's six-parameter space and ``KUKA_HARD_TASK_SPACE`` the harder family
 of ``KukaGraspHard-v0``: the same six plus four more. ``KUKA_HARD_V1_TASK_SPACE`` (``KukaGraspHard-v1``)
-is that family with a tighter hardest alignment margin, which PPO without a curriculum does not reach by
-chance as it did v0's (BENCHMARKS.md).
+is that family with a tighter hardest alignment margin, whose reward PPO without a curriculum did not find
+by chance on its screening seeds, as it did v0's (BENCHMARKS.md).
 """
 
 from __future__ import annotations
