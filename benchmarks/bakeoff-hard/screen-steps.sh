@@ -3,11 +3,19 @@
 # Evaluation episode seeds 20000+, never the bake-off's 100000+.
 
 train() {  # NAME TEACHER STEPS SEED [extra train flags...]
-    local name=$1 teacher=$2 steps=$3 seed=$4
+    local name=$1 teacher=$2 steps=$3 seed=$4 latest reached
     shift 4
     echo "$(date -u +%FT%TZ) $name: training to $steps steps"
     "$PYTHON" -m kuka_curriculum train --env "$ENV_ID" --teacher "$teacher" --seed "$seed" --total-steps "$steps" \
         --eval-episodes 20 --run-dir "$OUT/$name" --resume-if-exists "$@" >> "$OUT/$name.log" 2>&1
+    # Ctrl-C ends a run cleanly at a checkpoint, and train exits 0: a run short of its steps was stopped,
+    # so the driver stops too, rather than evaluate it as finished (run it again to resume).
+    latest=$(find "$OUT/$name/checkpoints" -name 'step_*.pt' | sort | tail -n 1)
+    reached=$((10#$(basename "$latest" .pt | tr -dc 0-9)))
+    if [ "$reached" -lt "$steps" ]; then
+        echo "$(date -u +%FT%TZ) $name: stopped at $reached of $steps steps; run this again to resume"
+        exit 130
+    fi
     echo "$(date -u +%FT%TZ) $name: done"
 }
 

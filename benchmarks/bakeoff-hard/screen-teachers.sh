@@ -5,7 +5,8 @@
 #
 # The configurations are the lines of a list beside this file: NAME TEACHER STEPS SEED [train flags...];
 # screen-teachers.txt for KukaGraspHard-v0 (its design v4), screen-hard-v1.txt for KukaGraspHard-v1.
-# The list is read again before each run, so lines can be added while this runs; every line ever run stays in it (the record of every configuration tried). A finished run is
+# The list is read again before each run, so lines can be added while this runs; every line ever run
+# stays in it (the record of every configuration tried). A finished run is
 # skipped, an unfinished one resumes from its checkpoint, so running this again carries on.
 # Each finished run's metrics, teacher database and final evaluation are copied to
 # screening/v4-NAME/ (v0) or screening/hard-v1-NAME/ (v1) beside this file.
