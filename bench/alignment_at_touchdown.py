@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from task_hardness import CHUNK, POLICIES, episode_policy  # a sibling script: bench/ is the script's path
+
+# A sibling script (bench/ is the script's path, not a package).
+from task_hardness import CHUNK, POLICIES, Policy, episode_policy, run_episode
 
 from common.client.task_space import Task
 from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
@@ -48,21 +50,17 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[T
     torch.set_num_threads(1)
     env = make_kuka_env(env_id)
     network = None if policy in POLICIES else InferencePolicy(policy_snapshot(read_checkpoint(Path(policy))))
+
+    def deterministic(observation: np.ndarray) -> np.ndarray:
+        assert network is not None
+        return np.clip(network.act(observation[None], deterministic=True)[0][0], -1.0, 1.0)
+
     episodes = []
     try:
         for seed in seeds:
-            act = episode_policy(policy, np.random.default_rng(seed)) if network is None else None
-            observation, _ = env.reset(seed=seed, options={"task": task})
-            while True:
-                if network is not None:
-                    action = network.act(observation[None], deterministic=True)[0][0]
-                else:
-                    assert act is not None
-                    action = act(observation)
-                observation, _, terminated, truncated, info = env.step(np.clip(action, -1.0, 1.0))
-                if terminated or truncated:
-                    episodes.append((bool(info["is_success"]), float(info.get("off_square_degrees", np.nan))))
-                    break
+            act: Policy = deterministic if network else episode_policy(policy, np.random.default_rng(seed))
+            info, _, _ = run_episode(env, task, act, seed)
+            episodes.append((bool(info["is_success"]), float(info.get("off_square_degrees", np.nan))))
     finally:
         env.close()
     return episodes

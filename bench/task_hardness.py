@@ -25,6 +25,7 @@ import math
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,9 +75,8 @@ def episode_policy(name: str, rng: np.random.Generator) -> Policy:
     return scripted_action
 
 
-def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, float, int]:
-    """One episode: (success, return, length)."""
-    act = episode_policy(policy, np.random.default_rng(seed))
+def run_episode(env: KukaGraspEnv, task: Task, act: Policy, seed: int) -> tuple[dict[str, Any], float, int]:
+    """One episode of ``act``: (its last ``info``, return, length)."""
     observation, _ = env.reset(seed=seed, options={"task": task})
     total, length = 0.0, 0
     while True:
@@ -84,7 +84,13 @@ def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, f
         total += reward
         length += 1
         if terminated or truncated:
-            return bool(info["is_success"]), total, length
+            return info, total, length
+
+
+def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, float, int]:
+    """One episode of a named policy: (success, return, length)."""
+    info, total, length = run_episode(env, task, episode_policy(policy, np.random.default_rng(seed)), seed)
+    return bool(info["is_success"]), total, length
 
 
 def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[tuple[bool, float, int]]:
