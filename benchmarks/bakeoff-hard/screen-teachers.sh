@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Issue 29, part 2: screening no curriculum and teacher parameters on a hard family before the bake-off, on the
-# screening seeds (100+) and evaluation episode seeds 20000+, never the bake-off's (training seeds
-# 0 to 4, evaluation seeds 100000+). One run at a time (a run uses both cores).
+# Issue 29, part 2: screening no curriculum and teacher parameters on a hard family before the
+# bake-off, on the screening seeds (100+) and evaluation episode seeds 20000+, never the bake-off's
+# (training seeds 0 to 4, evaluation seeds 100000+). One run at a time (a run uses both cores).
 #
 # The configurations are the lines of a list beside this file: NAME TEACHER STEPS SEED [train flags...];
 # screen-teachers.txt for KukaGraspHard-v0 (its design v4), screen-hard-v1.txt for KukaGraspHard-v1.
