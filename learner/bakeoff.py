@@ -133,6 +133,9 @@ def run(args: argparse.Namespace) -> int:
     except RunFailed as error:
         print(f"kuka-curriculum bakeoff: {error}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("kuka-curriculum bakeoff: stopped; the same command resumes where it stopped", file=sys.stderr)
+        return 130
 
 
 def _bakeoff(args: argparse.Namespace) -> int:

@@ -45,7 +45,11 @@ def run(args: argparse.Namespace) -> int:
     except UsageError as error:
         print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
         return 2
-    result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
+    try:
+        result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
+    except KeyboardInterrupt:
+        print("kuka-curriculum evaluate: stopped; nothing was written", file=sys.stderr)
+        return 130
     print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
     print(result.summary())
     if args.json is not None:

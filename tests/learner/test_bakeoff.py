@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import imageio.v3 as iio
 import pytest
+from ctrl_c import ctrl_c_as_the_pool_starts
+from tiny_checkpoint import save_untrained_checkpoint
 
 from common.kuka import HARD_ENV_ID
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
@@ -115,6 +118,20 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # Other hyperparameters in the same directory would make an unfair comparison.
     assert bakeoff("--teachers", "fixed", "--total-steps", str(2 * BATCH), "--rollout-length", "64") == 2
     assert "rollout_length: 128 before, 64 now" in capsys.readouterr().err
+
+
+def test_ctrl_c_during_a_final_evaluation_stops_the_bakeoff_cleanly(tmp_path):
+    out = tmp_path / "bakeoff"
+    run = plan_runs(out, ["fixed"], seeds=1)[0]
+    # Trained to its budget: only the final evaluation is left.
+    steps = load_checkpoint(save_untrained_checkpoint(run.directory)).counters.steps
+    command = [sys.executable, "-m", "kuka_curriculum", "bakeoff", "--out", str(out), "--teachers", "fixed"]
+    command += ["--seeds", "1", "--total-steps", str(steps), "--eval-episodes", "400", "--eval-processes", "2"]
+    code, stderr = ctrl_c_as_the_pool_starts(command, workers=2)
+    assert code == 130, stderr
+    assert "kuka-curriculum bakeoff: stopped; the same command resumes where it stopped" in stderr
+    assert "Traceback" not in stderr, stderr
+    assert not (run.directory / "evaluation.json").exists()
 
 
 def test_a_bakeoff_on_the_hard_family_trains_and_evaluates_there(tmp_path, ray_cluster, capsys):

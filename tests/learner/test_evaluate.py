@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
+from ctrl_c import ctrl_c_as_the_pool_starts
 from tiny_checkpoint import TINY_EPISODE_STEPS, save_untrained_checkpoint
 
 from common.kuka import HARD_ENV_ID
@@ -143,6 +145,16 @@ def test_bad_input_is_refused_in_one_line(checkpoint, tmp_path, capsys):
     assert "notes.pt is not a checkpoint this version can read" in capsys.readouterr().err
     assert main(["evaluate", str(checkpoint), "--task", "jp2=5"]) == 2
     assert "--task: task parameter 'jp2'=5.0 is outside its bounds" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_an_evaluation_at_once_and_cleanly(checkpoint):
+    """Ctrl-C reaches the pool's workers too, here while they are still starting: they must leave the
+    stopping to the parent instead of dying and breaking the pool, and the queued episodes are dropped."""
+    command = [sys.executable, "-m", "kuka_curriculum", "evaluate", str(checkpoint), "--episodes", "400"]
+    code, stderr = ctrl_c_as_the_pool_starts([*command, "--processes", "2", "--max-episode-steps", "1000"], workers=2)
+    assert code == 130, stderr
+    assert "kuka-curriculum evaluate: stopped; nothing was written" in stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
 
 
 @pytest.mark.parametrize(
