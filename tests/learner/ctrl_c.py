@@ -7,24 +7,11 @@ import signal
 import subprocess
 import threading
 import time
-from pathlib import Path
+
+from spawned_processes import spawned_children
 
 START_TIMEOUT_S = 120
 STOP_TIMEOUT_S = 60
-
-
-def pool_workers(parent: int) -> list[int]:
-    """The pids of ``parent``'s spawned multiprocessing children, read from /proc."""
-    workers = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rpartition(")")[2].split()
-            command = (stat.parent / "cmdline").read_bytes()
-        except OSError:
-            continue  # it ended while we looked
-        if int(fields[1]) == parent and b"spawn_main" in command:
-            workers.append(int(stat.parent.name))
-    return workers
 
 
 def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, str]:
@@ -39,7 +26,7 @@ def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, st
     reader.start()
     try:
         deadline = time.monotonic() + START_TIMEOUT_S
-        while len(pool_workers(child.pid)) < workers:
+        while len(spawned_children(child.pid)) < workers:
             assert child.poll() is None and time.monotonic() < deadline, "".join(stderr)
             time.sleep(0.05)
         time.sleep(0.2)  # past the pool's start, and still long before its workers have imported torch

@@ -1,9 +1,9 @@
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
+from spawned_processes import spawned_children
 
 from common.client.schemas import ParameterSpec
 from common.kuka.task_space import KUKA_TASK_SPACE
@@ -40,11 +40,4 @@ def kuka_space() -> list[dict[str, Any]]:
 @pytest.fixture(scope="session")
 def fit_processes() -> Callable[[int], list[int]]:
     """Finds a service's fit processes: its multiprocessing children other than the resource tracker."""
-
-    def find(service_pid: int) -> list[int]:
-        children = []
-        for thread in Path(f"/proc/{service_pid}/task").iterdir():
-            children += [int(pid) for pid in (thread / "children").read_text().split()]
-        return [pid for pid in children if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
-
-    return find
+    return spawned_children
