@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +34,7 @@ from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
 from common.policy.actor_critic import InferencePolicy
 from learner.checkpoint_arguments import read_checkpoint
 from learner.kuka_policy import policy_snapshot
+from learner.process_pool import StoppablePool
 from learner.stats import wilson_interval
 
 MARGINS = (8.0, 5.0, 3.0, 2.0, 1.0)
@@ -103,7 +103,7 @@ def main() -> None:
     print(f"{args.env} hardest point, align_margin {ALIGN_MARGIN_ANY:g}, episode seeds {seeds[0]} to {seeds[-1]}")
     print(f"{'policy':40s} lifts   " + "  ".join(f"<= {margin:g} deg" for margin in MARGINS))
     report = []
-    with ProcessPoolExecutor(max_workers=args.processes) as pool:
+    with StoppablePool(max_workers=args.processes) as pool:
         futures = {
             policy: [pool.submit(play_chunk, args.env, task, policy, chunk) for chunk in chunks]
             for policy in args.policies

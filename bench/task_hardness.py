@@ -23,7 +23,6 @@ import argparse
 import json
 import math
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +32,7 @@ from common.client.task_space import Task
 from common.kuka import ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.env import KukaGraspEnv, make_kuka_env, off_square
 from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
+from learner.process_pool import StoppablePool
 from learner.stats import wilson_interval
 
 POLICIES = ("zero", "random", "drift", "scripted")
@@ -147,7 +147,7 @@ def main() -> None:
     chunks = [seeds[start : start + CHUNK] for start in range(0, len(seeds), CHUNK)]
     jobs = [(name, policy) for name in chosen for policy in args.policies]
     report = []
-    with ProcessPoolExecutor(max_workers=args.processes) as pool:
+    with StoppablePool(max_workers=args.processes) as pool:
         futures = {
             (name, policy): [pool.submit(play_chunk, args.env, chosen[name], policy, chunk) for chunk in chunks]
             for name, policy in jobs

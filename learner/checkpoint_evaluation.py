@@ -12,11 +12,7 @@ from __future__ import annotations
 
 import math
 import os
-import signal
-import threading
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import contextmanager
+from concurrent.futures import as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from typing import Any, cast
@@ -33,6 +29,7 @@ from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats
 from learner.checkpoint import Checkpoint
 from learner.kuka_policy import policy_snapshot
+from learner.process_pool import StoppablePool
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 
@@ -128,24 +125,6 @@ def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int, 
     _worker = (make_kuka_env(env_id, max_steps=max_episode_steps), InferencePolicy(snapshot), task)
 
 
-@contextmanager
-def _workers_ignore_ctrl_c() -> Iterator[None]:
-    """Processes started inside this block ignore SIGINT from birth (Python keeps an inherited ignore).
-
-    Ctrl-C reaches the whole process group. The parent decides what it means and stops the pool; a
-    worker that died of it, even while still importing, would break the pool under the parent. The
-    price: a Ctrl-C in the milliseconds it takes to start the processes goes unheard.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield  # only the main thread may set handlers, and only it receives Ctrl-C
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
 def _play_episode(seed: int) -> EpisodeStats:
     assert _worker is not None, "the pool runs _start_worker in each process before any episode"
     env, policy, task = _worker
@@ -184,22 +163,16 @@ def evaluate_policy(
             env.close()
         else:
             # spawn, not fork: the parent may hold Ray's and torch's threads, which fork does not copy safely.
-            pool = ProcessPoolExecutor(
+            with StoppablePool(
                 processes,
                 mp_context=get_context("spawn"),
                 initializer=_start_worker,
                 initargs=(snapshot, task, max_episode_steps, env_id),
-            )
-            try:
-                with _workers_ignore_ctrl_c():  # the pool starts its processes as the episodes are submitted
-                    futures = {pool.submit(_play_episode, each): index for index, each in enumerate(seeds)}
+            ) as pool:
+                futures = {pool.submit(_play_episode, each): index for index, each in enumerate(seeds)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
-            finally:
-                # One shutdown, not a ``with`` block's second one, which would take back the cancelling:
-                # stopped (Ctrl-C) or failed, only the episodes already running play out.
-                pool.shutdown(cancel_futures=True)
     # Every index was filled above: the loop or the pool answered each seed.
     return EvaluationResult(task=task, seed=seed, episodes=tuple(cast(list[EpisodeStats], results)), env=env_id)
 
