@@ -124,7 +124,12 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         for result in results
         if (params := registration_params(result.teacher, settings))
     )
-    seeds = max(len(result.runs) for result in results)
+    seed_counts = sorted({len(result.runs) for result in results})
+    seeds = (
+        f"{seed_counts[0]} seed{'s' if seed_counts[0] > 1 else ''}"
+        if len(seed_counts) == 1
+        else f"{seed_counts[0]} to {seed_counts[-1]} seeds (the Seeds column says how many)"
+    )
     env = settings.get("env", ENV_ID)
     # The book's returns were measured on its own task: they say nothing of another family's hardest.
     book_returns = BOOK_RETURNS if env == ENV_ID else {}
@@ -132,7 +137,7 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
     lines = [
         "# Teacher bake-off on the hardest task",
         "",
-        f"Each teacher trained {seeds} seed{'s' if seeds > 1 else ''} for {settings['total_steps']:_} environment "
+        f"Each teacher trained {seeds} for {settings['total_steps']:_} environment "
         f"steps with the same settings ({trained}) and hyperparameters. Each final policy then played "
         f"{episodes} deterministic episodes on {hardest} (episode seeds {seed} to {seed + episodes - 1}, "
         "the same for every run).",

@@ -202,12 +202,30 @@ def test_the_report_names_what_each_teacher_was_registered_with(tmp_path):
     registered = next(line for line in report.splitlines() if "registered with" in line)
     assert registered.endswith("defaults: ALP-GMM reward_range=[-5.0, 10.0], target_task_ratio=0.2.")
     assert "hardest task only" not in registered and "teacher params" not in report
+    assert "Each teacher trained 1 seed for 1_000 environment steps" in report
 
     # Each teacher is named with its own parameters, and only its own.
     settings["teacher_params"] = {"alp-gmm": {"fit_rate": 100}, "fixed": {}}
     report = results_markdown(results, settings, episodes=1, seed=0)
     registered = next(line for line in report.splitlines() if "registered with" in line)
     assert registered.endswith("ALP-GMM reward_range=[-5.0, 10.0], target_task_ratio=0.2, fit_rate=100.")
+
+
+def test_the_report_says_how_many_seeds_while_a_round_is_unfinished(tmp_path):
+    task = KUKA_TASK_SPACE.hardest()
+    evaluation = EvaluationResult(task, 0, (EpisodeStats(task, 1.0, True, 800),))
+    seeds = {"fixed": 5, "currot": 1}
+    results = [
+        TeacherResult(
+            teacher,
+            tuple(Run(teacher, seed, tmp_path / f"{teacher}-{seed}") for seed in range(count)),
+            (evaluation,) * count,
+        )
+        for teacher, count in seeds.items()
+    ]
+    settings = {"total_steps": 1000, "curve_every": 25, "curve_episodes": 20, "teacher_params": {}}
+    report = results_markdown(results, settings, episodes=1, seed=0)
+    assert "Each teacher trained 1 to 5 seeds (the Seeds column says how many) for 1_000" in report
 
 
 def test_bad_teacher_parameters_stop_the_bakeoff_before_any_run(tmp_path, capsys):
