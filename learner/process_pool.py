@@ -1,4 +1,4 @@
-"""A process pool that Ctrl-C stops at once and cleanly: for commands that play many episodes in
+"""A process pool that Ctrl-C stops cleanly: for commands that play many episodes in
 worker processes (``evaluate``, ``bakeoff``'s final evaluations, the benchmark scripts)."""
 
 from __future__ import annotations
