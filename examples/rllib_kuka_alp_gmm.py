@@ -38,7 +38,7 @@ from common.client.teacher_client import TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
-from learner.config import KUKA_TEACHER_PARAMS
+from learner.config import kuka_teacher_params
 
 ENV_NAME = "kuka-grasp-curriculum"
 
@@ -59,20 +59,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRegistration:
-    """The curriculum to create if it does not exist: the kind over the KUKA space, with the
-    training CLI's KUKA defaults (``KUKA_TEACHER_PARAMS``) under the overrides."""
-    params = {**KUKA_TEACHER_PARAMS.get(teacher, {}), **dict(overrides)}
-    return CurriculumRegistration(cast(TeacherKind, teacher), KUKA_TASK_SPACE, params=params)
-
-
 def make_env(config: dict[str, Any]) -> gymnasium.Env:
     """Called by RLlib in each env runner with the ``env_config`` below. Ray sends this function by
     value, so an env runner has not imported ``common.kuka``, which registers the KUKA ids: import it."""
     import common.kuka  # noqa: F401
 
     kuka = gymnasium.make(ENV_ID, max_steps=config["max_episode_steps"])
-    register = registration(config["teacher"], config["teacher_params"])
+    params = kuka_teacher_params(config["teacher"], dict(config["teacher_params"]))
+    register = CurriculumRegistration(cast(TeacherKind, config["teacher"]), KUKA_TASK_SPACE, params=params)
     return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=register)
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import cast
 
 import gymnasium
 from stable_baselines3 import PPO
@@ -33,7 +33,7 @@ from common.client.teacher_client import TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
-from learner.config import KUKA_TEACHER_PARAMS
+from learner.config import kuka_teacher_params
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -53,19 +53,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def registration(teacher: str, overrides: list[tuple[str, Any]]) -> CurriculumRegistration:
-    """The curriculum to create if it does not exist: the kind over the KUKA space, with the
-    training CLI's KUKA defaults (``KUKA_TEACHER_PARAMS``) under the overrides."""
-    params = {**KUKA_TEACHER_PARAMS.get(teacher, {}), **dict(overrides)}
-    return CurriculumRegistration(cast(TeacherKind, teacher), KUKA_TASK_SPACE, params=params)
-
-
 def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]:
     """Runs in the worker process: the wrapper makes its teacher client there."""
 
     def make() -> gymnasium.Env:
         kuka = gymnasium.make(ENV_ID, max_steps=args.max_episode_steps)
-        register = registration(args.teacher, args.teacher_params)
+        params = kuka_teacher_params(args.teacher, dict(args.teacher_params))
+        register = CurriculumRegistration(cast(TeacherKind, args.teacher), KUKA_TASK_SPACE, params=params)
         env = CurriculumWrapper(kuka, args.teacher_url, args.curriculum, register=register)
         return Monitor(env, str(args.log_dir / f"env-{rank}"), info_keywords=("task_id",))
 

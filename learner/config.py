@@ -120,6 +120,12 @@ A fifth of its tasks are the hardest task: its other tasks rarely place the bloc
 part of the test's range, and without them one seed in three ended under 80% (BENCHMARKS.md, issue 18)."""
 
 
+def kuka_teacher_params(teacher: str, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """What a KUKA curriculum is registered with: ``KUKA_TEACHER_PARAMS``, then the overrides. The
+    training CLI and the examples share it, so one teacher name means one configuration everywhere."""
+    return {**KUKA_TEACHER_PARAMS.get(teacher, {}), **overrides}
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
@@ -163,8 +169,8 @@ class TrainConfig:
 
     @property
     def teacher_params(self) -> dict[str, Any]:
-        """What the curriculum is registered with: ``KUKA_TEACHER_PARAMS``, then the overrides."""
-        return {**KUKA_TEACHER_PARAMS.get(self.teacher, {}), **self.teacher_overrides}
+        """What the curriculum is registered with (``kuka_teacher_params``)."""
+        return kuka_teacher_params(self.teacher, self.teacher_overrides)
 
     @property
     def batch_size(self) -> int:

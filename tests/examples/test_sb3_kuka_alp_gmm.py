@@ -12,6 +12,8 @@ from pathlib import Path
 
 from example_runner import curriculum_state, finish, results_received, start_example
 
+from learner.config import KUKA_TEACHER_PARAMS
+
 CURRICULUM = "kuka-sb3-alp-gmm"
 TOTAL_STEPS = 8_192
 EPISODE_STEPS = 100
@@ -57,3 +59,6 @@ def test_sb3_ppo_reports_every_episode_across_a_teacher_restart(teacher, tmp_pat
     assert state["curriculum"]["counters"]["results_received"] == len(issued) > before_close
     assert sorted(result["task_id"] for result in state["recent_results"]) == sorted(issued)
     assert state["curriculum"]["config"]["teacher"] == "alp-gmm"
+    kuka_defaults = KUKA_TEACHER_PARAMS["alp-gmm"]
+    registered = state["curriculum"]["config"]["params"]
+    assert {name: registered.get(name) for name in kuka_defaults} == kuka_defaults, "the training CLI's defaults"
