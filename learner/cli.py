@@ -34,7 +34,8 @@ PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
 (in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
 RAY_NAMESPACE = "kuka-curriculum"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-"""Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint."""
+"""Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint, and a run
+stopped before its budget exits 128 + the signal's number (130, 143), as a shell reports a signal."""
 
 
 class UsageError(Exception):
@@ -296,9 +297,12 @@ def _run_training(
     if checkpoint is not None:
         print(f"resuming from {checkpoint.path} at step {start:_}")
 
+    stopped_by: list[int] = []
+
     def on_stop_signal(signum: int, frame: Any) -> None:
         if trainer.stop_requested:
             raise KeyboardInterrupt
+        stopped_by.append(signum)
         trainer.request_stop()
         progress.write("stopping after this iteration (Ctrl-C again to stop at once, without a final checkpoint)")
 
@@ -321,5 +325,9 @@ def _run_training(
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
+    unfinished = bool(stopped_by) and trainer.counters.steps < config.total_steps
+    if unfinished:
+        print(f"stopped at step {trainer.counters.steps:_} of {config.total_steps:_}; --resume continues the run")
     print(f"final checkpoint: {final}")
-    return 0
+    # A run stopped early is not done: a script, or a restart policy such as Compose's on-failure, must see that.
+    return 128 + stopped_by[0] if unfinished else 0
