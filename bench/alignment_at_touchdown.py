@@ -11,7 +11,10 @@ observation, so a policy plays exactly as it would under any margin. A policy is
         --episodes 1000 --seed 30000 --processes 2
 
 Prints, per policy, the lifts and how many of them each margin counts (Wilson 95% intervals over the
-episodes), and the quartiles of the touchdown angle over the lifts.
+episodes), and the quartiles of the touchdown angle over the lifts. Then, per policy, where the episodes
+without a lift went: how many never touched down, and how far from the block the others touched down
+(the block's x and y in the gripper's frame a step before touchdown, measured from the median over every
+lift played here, where a grasp that holds the block puts it).
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from task_hardness import CHUNK, POLICIES, Policy, episode_policy, run_episode
 
 from common.client.task_space import Task
 from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.env import make_kuka_env
+from common.kuka.env import BLOCK_XY_IN_GRIPPER, make_kuka_env
 from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
 from common.policy.actor_critic import InferencePolicy
 from learner.checkpoint_arguments import read_checkpoint
@@ -40,9 +43,13 @@ from learner.stats import wilson_interval
 MARGINS = (8.0, 5.0, 3.0, 2.0, 1.0)
 """Margins (degrees) to count the lifts under: v0's hardest 8, v1's 2, and around them."""
 
-Touchdown = tuple[bool, float]
-"""One episode: whether the block was lifted, and the fingers' angle from square at touchdown (NaN if the
-episode ended without touching the tray)."""
+MISS_CM = (1.0, 2.0, 4.0)
+"""Distances (cm) from where lifts hold the block: how many touchdowns without a lift lay farther."""
+
+Touchdown = tuple[bool, float, float, float]
+"""One episode: whether the block was lifted, the fingers' angle from square at touchdown (NaN if the
+episode ended without touching the tray), and the block's x and y (metres) in the gripper's frame a step
+before the episode ended."""
 
 
 def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[Touchdown]:
@@ -59,8 +66,9 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[T
     try:
         for seed in seeds:
             act: Policy = deterministic if network else episode_policy(policy, np.random.default_rng(seed))
-            info, _, _ = run_episode(env, task, act, seed)
-            episodes.append((bool(info["is_success"]), float(info.get("off_square_degrees", np.nan))))
+            info, _, _, last_seen = run_episode(env, task, act, seed)
+            block_x, block_y = (float(value) for value in last_seen[BLOCK_XY_IN_GRIPPER])
+            episodes.append((bool(info["is_success"]), float(info.get("off_square_degrees", np.nan)), block_x, block_y))
     finally:
         env.close()
     return episodes
@@ -68,7 +76,7 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[T
 
 def summarise(policy: str, episodes: list[Touchdown]) -> tuple[str, dict[str, Any]]:
     """A printed row and a JSON record: the lifts and, for each margin, the lifts it would count."""
-    angles = np.array([angle for lifted, angle in episodes if lifted])
+    angles = np.array([angle for lifted, angle, _, _ in episodes if lifted])
     lifts = wilson_interval(len(angles), len(episodes))
     counted = {margin: wilson_interval(int(np.sum(angles <= margin)), len(episodes)) for margin in MARGINS}
     quartiles = [round(float(angle), 2) for angle in np.quantile(angles, [0.25, 0.5, 0.75])] if angles.size else None
@@ -80,6 +88,29 @@ def summarise(policy: str, episodes: list[Touchdown]) -> tuple[str, dict[str, An
         "lifts": lifts.to_dict(),
         "counted_by_margin": {f"{margin:g}": interval.to_dict() for margin, interval in counted.items()},
         "lift_angle_quartiles": quartiles,
+    }
+    return row, record
+
+
+def summarise_misses(policy: str, episodes: list[Touchdown], held_at: np.ndarray) -> tuple[str, dict[str, Any]]:
+    """A printed row and a JSON record: the episodes without a lift, those that never touched down, and
+    for the touchdowns without a lift how far (cm) the block lay from ``held_at``, where lifts hold it."""
+    misses = [(angle, np.array([x, y])) for lifted, angle, x, y in episodes if not lifted]
+    offsets_cm = np.array([100.0 * np.linalg.norm(xy - held_at) for angle, xy in misses if not np.isnan(angle)])
+    no_touchdown = sum(1 for angle, _ in misses if np.isnan(angle))
+    beyond = {cm: int(np.sum(offsets_cm > cm)) for cm in MISS_CM}
+    quartiles = [round(float(cm), 1) for cm in np.quantile(offsets_cm, [0.25, 0.5, 0.75])] if offsets_cm.size else None
+    cells = "  ".join(f"{count / len(episodes):9.1%}" for count in beyond.values())
+    row = (
+        f"{policy[-40:]:40s} {len(misses) / len(episodes):6.1%}  {no_touchdown / len(episodes):11.1%}  {cells}"
+        f"   offset quartiles (cm) {quartiles}"
+    )
+    record = {
+        "policy": policy,
+        "episodes_without_lift": len(misses),
+        "without_touchdown": no_touchdown,
+        "touchdowns_farther_than_cm": {f"{cm:g}": count for cm, count in beyond.items()},
+        "touchdown_offset_quartiles_cm": quartiles,
     }
     return row, record
 
@@ -102,19 +133,34 @@ def main() -> None:
     chunks = [seeds[start : start + CHUNK] for start in range(0, len(seeds), CHUNK)]
     print(f"{args.env} hardest point, align_margin {ALIGN_MARGIN_ANY:g}, episode seeds {seeds[0]} to {seeds[-1]}")
     print(f"{'policy':40s} lifts   " + "  ".join(f"<= {margin:g} deg" for margin in MARGINS))
-    report = []
+    records: dict[str, dict[str, Any]] = {}
     with StoppablePool(max_workers=args.processes) as pool:
         futures = {
             policy: [pool.submit(play_chunk, args.env, task, policy, chunk) for chunk in chunks]
             for policy in args.policies
         }
+        played = {}
         for policy, parts in futures.items():
-            row, record = summarise(policy, [episode for part in parts for episode in part.result()])
+            played[policy] = [episode for part in parts for episode in part.result()]
+            row, records[policy] = summarise(policy, played[policy])
             print(row, flush=True)
-            report.append(record)
+    held = np.array([[x, y] for episodes in played.values() for lifted, _, x, y in episodes if lifted])
+    if not held.size:
+        print("no lifts, so no place where a lift holds the block to measure the misses from")
+    else:
+        held_at = np.median(held, axis=0)
+        print(
+            f"\nwithout a lift; touchdowns farther than each distance from where lifts hold the block "
+            f"({100 * held_at[0]:.1f}, {100 * held_at[1]:.1f}) cm in the gripper's frame"
+        )
+        print(f"{'policy':40s} misses  no touchdown  " + "  ".join(f"   > {cm:g} cm" for cm in MISS_CM))
+        for policy, episodes in played.items():
+            row, records[policy]["misses"] = summarise_misses(policy, episodes, held_at)
+            print(row, flush=True)
     if args.json is not None:
         args.json.write_text(
-            json.dumps({"env": args.env, "task": task, "seed": args.seed, "results": report}, indent=2) + "\n"
+            json.dumps({"env": args.env, "task": task, "seed": args.seed, "results": list(records.values())}, indent=2)
+            + "\n"
         )
 
 

@@ -75,21 +75,23 @@ def episode_policy(name: str, rng: np.random.Generator) -> Policy:
     return scripted_action
 
 
-def run_episode(env: KukaGraspEnv, task: Task, act: Policy, seed: int) -> tuple[dict[str, Any], float, int]:
-    """One episode of ``act``: (its last ``info``, return, length)."""
+def run_episode(env: KukaGraspEnv, task: Task, act: Policy, seed: int) -> tuple[dict[str, Any], float, int, np.ndarray]:
+    """One episode of ``act``: (its last ``info``, return, length, the observation its last action saw).
+    That observation is where the gripper was, within one step, when a touchdown ended the episode."""
     observation, _ = env.reset(seed=seed, options={"task": task})
     total, length = 0.0, 0
     while True:
+        last_seen = observation
         observation, reward, terminated, truncated, info = env.step(act(observation))
         total += reward
         length += 1
         if terminated or truncated:
-            return info, total, length
+            return info, total, length, last_seen
 
 
 def play(env: KukaGraspEnv, task: Task, policy: str, seed: int) -> tuple[bool, float, int]:
     """One episode of a named policy: (success, return, length)."""
-    info, total, length = run_episode(env, task, episode_policy(policy, np.random.default_rng(seed)), seed)
+    info, total, length, _ = run_episode(env, task, episode_policy(policy, np.random.default_rng(seed)), seed)
     return bool(info["is_success"]), total, length
 
 
