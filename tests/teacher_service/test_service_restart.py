@@ -9,7 +9,10 @@ next tasks, including when a fit was still running at the kill.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -78,10 +81,25 @@ class Mirror:
         return counters
 
 
+class _Paused:
+    """A process stopped with SIGSTOP until ``resume`` (which may be called more than once)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid: int | None = pid
+        os.kill(pid, signal.SIGSTOP)
+
+    def resume(self) -> None:
+        if self.pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGCONT)
+            self.pid = None
+
+
 @pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
 def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, kind):
     space = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
     service = ServiceProcess(tmp_path / "teacher.db").start()
+    paused: _Paused | None = None
     try:
         api = httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0)
         assert (
@@ -100,13 +118,17 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
         mirror.report(mirror.draw(8))  # result 32: fit 1
         mirror.finish_fits()
         unreported = mirror.draw(3)
+        # A warm process can finish a small fit before the next request, so it is paused: fit 2
+        # is then surely still running when the service dies.
+        (fitter,) = fit_processes(service.pid)
+        paused = _Paused(fitter)
         mirror.report(mirror.draw(8))
         mirror.report(mirror.draw(8))  # result 48: fit 2, still running when the service dies
         before = mirror.counters()
         assert before["fits_pending"] == 1
-        (fitter,) = fit_processes(service.pid)
 
         service.kill()
+        paused.resume()
         deadline = time.monotonic() + 30
         while Path(f"/proc/{fitter}").exists():
             assert time.monotonic() < deadline, "the fit process outlived the killed service"
@@ -132,4 +154,6 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
         }
         api.close()
     finally:
+        if paused is not None:
+            paused.resume()
         service.stop()
