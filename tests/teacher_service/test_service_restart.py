@@ -9,7 +9,6 @@ next tasks, including when a fit was still running at the kill.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -81,25 +80,10 @@ class Mirror:
         return counters
 
 
-class _Paused:
-    """A process stopped with SIGSTOP until ``resume`` (which may be called more than once)."""
-
-    def __init__(self, pid: int) -> None:
-        self.pid: int | None = pid
-        os.kill(pid, signal.SIGSTOP)
-
-    def resume(self) -> None:
-        if self.pid is not None:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(self.pid, signal.SIGCONT)
-            self.pid = None
-
-
 @pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
 def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, kind):
     space = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
     service = ServiceProcess(tmp_path / "teacher.db").start()
-    paused: _Paused | None = None
     try:
         api = httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0)
         assert (
@@ -121,14 +105,15 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
         # A warm process can finish a small fit before the next request, so it is paused: fit 2
         # is then surely still running when the service dies.
         (fitter,) = fit_processes(service.pid)
-        paused = _Paused(fitter)
-        mirror.report(mirror.draw(8))
-        mirror.report(mirror.draw(8))  # result 48: fit 2, still running when the service dies
-        before = mirror.counters()
-        assert before["fits_pending"] == 1
-
-        service.kill()
-        paused.resume()
+        os.kill(fitter, signal.SIGSTOP)
+        try:
+            mirror.report(mirror.draw(8))
+            mirror.report(mirror.draw(8))  # result 48: fit 2, still running when the service dies
+            before = mirror.counters()
+            assert before["fits_pending"] == 1
+            service.kill()
+        finally:
+            os.kill(fitter, signal.SIGCONT)
         deadline = time.monotonic() + 30
         while Path(f"/proc/{fitter}").exists():
             assert time.monotonic() < deadline, "the fit process outlived the killed service"
@@ -154,6 +139,4 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
         }
         api.close()
     finally:
-        if paused is not None:
-            paused.resume()
         service.stop()
