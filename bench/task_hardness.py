@@ -30,7 +30,8 @@ import numpy as np
 
 from common.client.task_space import Task
 from common.kuka import ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.env import KukaGraspEnv, make_kuka_env, off_square
+from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.scripted import scripted_action
 from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
 from learner.process_pool import StoppablePool
 from learner.stats import wilson_interval
@@ -38,29 +39,11 @@ from learner.stats import wilson_interval
 POLICIES = ("zero", "random", "drift", "scripted")
 CHUNK = 50
 """Episodes per unit of work handed to a process."""
-SCRIPT_GAIN = 100.0
-"""Scripted controller: action per metre of x/y offset (saturates beyond 1 cm)."""
-SCRIPT_YAW_GAIN = 5.0
-"""Scripted controller: wrist action per radian of misalignment."""
 DRIFT_STD = math.exp(-0.5)
 """Drift policy: the action noise of an untrained policy (``PPOConfig.init_log_std`` -0.5)."""
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Observation to action, for one episode."""
-
-
-def scripted_action(observation: np.ndarray) -> np.ndarray:
-    """Move over the block and turn the fingers across it, from the observation alone.
-
-    The block's offset in the gripper's frame (entries 6 and 7) maps to the world by the gripper's yaw
-    (entry 5), the gripper pointing down; the fingers close across the block when its yaw in the
-    gripper's frame (entry 8) is pi/2, modulo pi.
-    """
-    yaw, block_x, block_y, block_yaw = (float(value) for value in observation[5:9])
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    world_dx, world_dy = cos * block_x + sin * block_y, sin * block_x - cos * block_y
-    action = np.array([SCRIPT_GAIN * world_dx, SCRIPT_GAIN * world_dy, SCRIPT_YAW_GAIN * off_square(block_yaw)])
-    return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
 def episode_policy(name: str, rng: np.random.Generator) -> Policy:

@@ -163,6 +163,13 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """The task used by the current episode and, until another is given, by later ones."""
         return dict(self._task)
 
+    def block_pose(self) -> tuple[float, float, float]:
+        """The block's world x, y (metres) and yaw (radians) now; right after ``reset``, where the task placed
+        it. Read-only: diagnostics ask it where an episode's block lay, which the observation gives only in
+        the gripper's frame."""
+        (x, y, _), orientation = self._base_pose(self._block)
+        return x, y, self._euler(orientation)[2]
+
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
