@@ -38,7 +38,7 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
-from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
+from teacher_service.teachers.performance import ReturnScale, RewardRange, check_reward_range, scored
 
 RECENT_MOVES = 200
 """Boundary moves kept in the state (the oldest are dropped; the totals count them all). A move's
@@ -68,8 +68,9 @@ class AdrParams(TeacherParams):
     """Widen a boundary when its queue's mean performance is at least this."""
     lower_threshold: float = Field(default=0.2, ge=0.0, le=1.0)
     """Narrow a boundary when its queue's mean performance is at most this."""
-    reward_range: RewardRange = list(KUKA_REWARD_RANGE)
-    """Returns mapped onto [0, 1] for results without ``success`` (KUKA default: [0, 10])."""
+    reward_range: RewardRange | None = None
+    """Returns mapped onto [0, 1] for results without ``success``; null learns it: from the lowest to
+    the highest return seen so far (``train`` gives the KUKA families [0, 10])."""
 
     @model_validator(mode="after")
     def _consistent(self) -> AdrParams:
@@ -77,12 +78,15 @@ class AdrParams(TeacherParams):
             raise ValueError(
                 f"lower_threshold ({self.lower_threshold}) must be below upper_threshold ({self.upper_threshold})"
             )
-        check_reward_range(self.reward_range)
+        if self.reward_range is not None:
+            check_reward_range(self.reward_range)
         return self
 
 
 class AdrTeacher(Teacher):
-    """A box of tasks that widens at boundaries the student masters (see the module docstring)."""
+    """A box of tasks that widens at boundaries the student masters. Scale: success when results
+    carry it, else returns placed in ``reward_range``, learned from the returns seen when not given.
+    """
 
     kind = "adr"
     Params = AdrParams
@@ -96,7 +100,10 @@ class AdrTeacher(Teacher):
         self.initial_high = np.minimum(start + half, space.high)
         self.low = self.initial_low.copy()
         self.high = self.initial_high.copy()
-        self.queues: dict[tuple[int, Side], list[float]] = {(d, side): [] for d in range(len(space)) for side in SIDES}
+        self.queues: dict[tuple[int, Side], list[tuple[float, bool | None]]] = {
+            (d, side): [] for d in range(len(space)) for side in SIDES
+        }
+        self.scale = ReturnScale()
         self.moves: deque[dict[str, Any]] = deque(maxlen=RECENT_MOVES)
         self.widened = 0
         self.narrowed = 0
@@ -126,20 +133,26 @@ class AdrTeacher(Teacher):
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         task = self.space.to_array(result.task)
-        score = performance(result, self.params.reward_range)
+        self.scale.see(result.reward)
+        outcome = (result.reward, result.success)
         for d in range(len(self.space)):
             if task[d] == self.low[d]:
-                self._queue(d, "low", score)
+                self._queue(d, "low", outcome)
             if task[d] == self.high[d]:
-                self._queue(d, "high", score)
+                self._queue(d, "high", outcome)
         return None
 
-    def _queue(self, d: int, side: Side, score: float) -> None:
+    def _mean_performance(self, queue: list[tuple[float, bool | None]]) -> float:
+        """The queue's mean performance, its returns placed in the range as it stands now."""
+        reward_range = self.scale.range(self.params.reward_range)
+        return statistics.fmean(scored(reward, success, reward_range) for reward, success in queue)
+
+    def _queue(self, d: int, side: Side, outcome: tuple[float, bool | None]) -> None:
         queue = self.queues[d, side]
-        queue.append(score)
+        queue.append(outcome)
         if len(queue) < self.params.queue_length:
             return
-        mean = statistics.fmean(queue)
+        mean = self._mean_performance(queue)
         queue.clear()
         if mean >= self.params.upper_threshold:
             self._move(d, side, outward=True, mean=mean)
@@ -200,7 +213,7 @@ class AdrTeacher(Teacher):
                     "value": float(self.low[d] if side == "low" else self.high[d]),
                     "at_limit": (d, side) not in open_,
                     "queued": len(queue),
-                    "queue_mean": statistics.fmean(queue) if queue else None,
+                    "queue_mean": self._mean_performance(queue) if queue else None,
                 }
             )
         return {
@@ -209,13 +222,18 @@ class AdrTeacher(Teacher):
             "widened": self.widened,
             "narrowed": self.narrowed,
             "full_space": not open_,
+            "reward_scale": self.scale.describe(self.params.reward_range),
         }
 
     def _export(self) -> dict[str, Any]:
         return {
             "low": self.low.tolist(),
             "high": self.high.tolist(),
-            "queues": [[self.space.names[d], side, list(queue)] for (d, side), queue in self.queues.items()],
+            "queues": [
+                [self.space.names[d], side, [[reward, success] for reward, success in queue]]
+                for (d, side), queue in self.queues.items()
+            ],
+            "return_scale": self.scale.export(),
             "moves": list(self.moves),
             "widened": self.widened,
             "narrowed": self.narrowed,
@@ -229,7 +247,10 @@ class AdrTeacher(Teacher):
         self.low, self.high = low, high
         index = {name: d for d, name in enumerate(self.space.names)}
         for name, side, queue in state["queues"]:
-            self.queues[index[name], side] = [float(score) for score in queue]
+            self.queues[index[name], side] = [
+                (float(reward), None if success is None else bool(success)) for reward, success in queue
+            ]
+        self.scale = ReturnScale(state["return_scale"])
         self.moves.extend(state["moves"])
         self.widened = int(state["widened"])
         self.narrowed = int(state["narrowed"])

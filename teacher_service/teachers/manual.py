@@ -30,6 +30,7 @@ from pydantic import Field, model_validator
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.params import FiniteFloat, TaskParam, TeacherParams, in_space
+from teacher_service.teachers.performance import ReturnScale
 
 LESSON_STEPS: dict[str, float] = {
     "rnd_obj_x": 0.05,
@@ -95,6 +96,11 @@ forth would otherwise grow its snapshot with every move."""
 
 Metric = Literal["reward", "success"]
 
+LEARNED_SHARE = 0.75
+"""A null ``threshold``: the share of the way from the lowest to the highest reward seen that the
+window's mean must pass (or the success rate, with the success metric). The ALP-GMM paper's toy
+counts a cube mastered at three quarters of its best reward."""
+
 
 def interpolated_plan(start: Task, hardest: Task, steps: int, space: TaskSpace) -> list[Task]:
     """``steps`` lessons evenly spaced from ``start`` to ``hardest``, both included exactly."""
@@ -126,11 +132,14 @@ class ManualParams(TeacherParams):
     metric: Metric = "reward"
     """What the window averages: each episode's reward, or its success (1 or 0; results that carry
     no success flag are then left out)."""
-    threshold: FiniteFloat = 5.5
-    """Move on when the window's mean exceeds this (5.5 is the book's reward; a success rate
-    lies in [0, 1))."""
+    threshold: FiniteFloat | None = None
+    """Move on when the window's mean exceeds this (the book's KUKA plan, which ``train`` gives:
+    reward 5.5; a success rate lies in [0, 1)). Null learns the reward's scale: move on when the
+    mean reward lies more than ``LEARNED_SHARE`` of the way from the lowest to the highest reward
+    seen so far; with the success metric, null is a success rate of ``LEARNED_SHARE``."""
     step_back_below: FiniteFloat | None = None
-    """Go back one lesson when the window's mean falls below this; null never goes back, as the book."""
+    """Go back one lesson when the window's mean falls below this, in the units of ``threshold``,
+    which it then needs; null never goes back, as the book."""
     window: int = Field(default=100, ge=1, le=10_000)
     """Recent episodes of the current lesson that are averaged (RLlib's smoothing window, which
     the book's callback read)."""
@@ -143,16 +152,22 @@ class ManualParams(TeacherParams):
             raise ValueError(f"min_episodes ({self.min_episodes}) cannot exceed window ({self.window})")
         if self.lessons is not None and (self.start is not None or self.steps is not None):
             raise ValueError("give either lessons, or start and steps to compute them, not both")
-        if self.metric == "success" and not 0.0 <= self.threshold < 1.0:
+        if self.metric == "success" and self.threshold is not None and not 0.0 <= self.threshold < 1.0:
             raise ValueError(f"a success-rate threshold lies in [0, 1), got {self.threshold}")
-        if self.step_back_below is not None and self.step_back_below >= self.threshold:
+        if self.step_back_below is not None and self.threshold is None:
+            raise ValueError(
+                "step_back_below needs a threshold in the same units: give threshold (a mean reward, or a "
+                "success rate with metric 'success')"
+            )
+        if self.step_back_below is not None and self.threshold is not None and self.step_back_below >= self.threshold:
             raise ValueError(f"step_back_below ({self.step_back_below}) must be below threshold ({self.threshold})")
         return self
 
 
 class ManualTeacher(Teacher):
     """A lesson plan: hands out the current lesson's task, moves on when the student is good enough
-    at it, and optionally steps back when it falls behind."""
+    at it, and optionally steps back when it falls behind. Scale: a ``threshold`` in the metric's
+    units, or when not given the rewards' range learned from those seen (a success rate of 0.75)."""
 
     kind = "manual"
     Params = ManualParams
@@ -169,6 +184,7 @@ class ManualTeacher(Teacher):
         self.unscored_results = 0
         self.moves: deque[dict[str, Any]] = deque(maxlen=MAX_MOVES)
         self.moves_total = 0
+        self.scale = ReturnScale()
 
     def _plan(self) -> list[Task]:
         params, space = self.params, self.space
@@ -192,6 +208,7 @@ class ManualTeacher(Teacher):
         return [dict(self.current) for _ in range(count)]
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
+        self.scale.see(result.reward)
         if not self._is_current(result.task):
             self.stale_results += 1
             return None
@@ -207,11 +224,26 @@ class ManualTeacher(Teacher):
             return None
         score = statistics.fmean(self.lesson_scores)
         floor = self.params.step_back_below
-        if self.lesson + 1 < len(self.lessons) and score > self.params.threshold:
-            self._move(self.lesson + 1, f"{self._measured(score)} > {self.params.threshold}")
+        threshold = self._threshold()
+        if self.lesson + 1 < len(self.lessons) and threshold is not None and score > threshold:
+            self._move(self.lesson + 1, f"{self._measured(score)} > {threshold:.4g}{self._learned_note()}")
         elif self.lesson > 0 and floor is not None and score < floor:
             self._move(self.lesson - 1, f"{self._measured(score)} < {floor}")
         return None
+
+    def _threshold(self) -> float | None:
+        """The given threshold, or the learned one (none while every reward seen is the same)."""
+        if self.params.threshold is not None:
+            return self.params.threshold
+        if self.params.metric == "success":
+            return LEARNED_SHARE
+        seen = self.scale.range()
+        return None if seen is None else seen[0] + LEARNED_SHARE * (seen[1] - seen[0])
+
+    def _learned_note(self) -> str:
+        if self.params.threshold is not None or self.params.metric == "success":
+            return ""
+        return f" ({LEARNED_SHARE} of the way from the lowest to the highest reward seen, {self.scale.export()})"
 
     def _measured(self, score: float) -> str:
         what = "mean reward" if self.params.metric == "reward" else "success rate"
@@ -239,6 +271,9 @@ class ManualTeacher(Teacher):
             "lesson_episodes": self.lesson_episodes,
             "metric": self.params.metric,
             "recent_metric": statistics.fmean(self.lesson_scores) if self.lesson_scores else None,
+            "threshold": self._threshold(),
+            "threshold_source": "given" if self.params.threshold is not None else "learned",
+            "rewards_seen": self.scale.export(),
             "stale_results": self.stale_results,
             "unscored_results": self.unscored_results,
             "moves": [dict(move) for move in self.moves],
@@ -255,6 +290,7 @@ class ManualTeacher(Teacher):
             "unscored_results": self.unscored_results,
             "moves": [dict(move) for move in self.moves],
             "moves_total": self.moves_total,
+            "return_scale": self.scale.export(),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
@@ -276,3 +312,4 @@ class ManualTeacher(Teacher):
             for move in state["moves"]
         )
         self.moves_total = int(state["moves_total"])
+        self.scale = ReturnScale(state["return_scale"])

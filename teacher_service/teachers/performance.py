@@ -3,14 +3,17 @@
 ADR and SPDL compare the student's results with thresholds. A result that says whether the episode
 succeeded counts 1 or 0, so a mean is a success rate; a result without ``success`` counts its
 return mapped linearly from ``reward_range`` onto [0, 1] (clipped), so a mean compares the return
-with the same thresholds. The KUKA default range [0, 10] maps a grasp (about +9 to +10) to about
-1 and a failed episode (about -3 to +2) to 0..0.2, so both readings of a run give close means.
-The KUKA learner reports success with every result, so there the thresholds are on success rates.
+with the same thresholds. Without a ``reward_range`` (the kinds' default) the range is learned:
+the lowest and highest returns seen so far (``ReturnScale``), so the same defaults work whatever
+the returns' units, and a threshold then reads "this far from the worst toward the best return
+seen". ``train`` passes the KUKA range [0, 10], which maps a grasp (about +9 to +10) to about 1
+and a failed episode (about -3 to +2) to 0..0.2; the KUKA learner reports success with every
+result anyway, so there the thresholds are on success rates.
 """
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from pydantic import Field
 
@@ -37,7 +40,46 @@ def check_reward_range(reward_range: list[float]) -> None:
 
 def performance(result: EpisodeResult, reward_range: list[float]) -> float:
     """1 or 0 from ``result.success`` when given, else the return scaled by ``reward_range``."""
-    if result.success is not None:
-        return 1.0 if result.success else 0.0
+    return scored(result.reward, result.success, reward_range)
+
+
+def scored(reward: float, success: bool | None, reward_range: list[float] | None) -> float:
+    """1 or 0 from ``success`` when given, else ``reward`` placed in ``reward_range`` (clipped to
+    [0, 1]); 0 when there is no range yet (a learned one before two different returns were seen)."""
+    if success is not None:
+        return 1.0 if success else 0.0
+    if reward_range is None:
+        return 0.0
     low, high = reward_range
-    return min(max((result.reward - low) / (high - low), 0.0), 1.0)
+    return min(max((reward - low) / (high - low), 0.0), 1.0)
+
+
+class ReturnScale:
+    """The lowest and highest return seen so far: the ``reward_range`` of a kind given none. Two
+    numbers, whatever the number of results; results are placed in it when a decision is made, so
+    a queue of rising returns is judged against the best return seen by then, not by each arrival."""
+
+    def __init__(self, seen: list[float] | None = None) -> None:
+        self.low: float | None = None if seen is None else float(seen[0])
+        self.high: float | None = None if seen is None else float(seen[1])
+
+    def see(self, reward: float) -> None:
+        self.low = reward if self.low is None else min(self.low, reward)
+        self.high = reward if self.high is None else max(self.high, reward)
+
+    def range(self, given: list[float] | None = None) -> list[float] | None:
+        """``given`` when there is one, else the learned range once it spans two different returns."""
+        if given is not None:
+            return given
+        if self.low is None or self.high is None or not self.low < self.high:
+            return None
+        return [self.low, self.high]
+
+    def export(self) -> list[float] | None:
+        return None if self.low is None or self.high is None else [self.low, self.high]
+
+    def describe(self, given: list[float] | None) -> dict[str, Any]:
+        """Which range scores returns, for the dashboard: the given one or what was learned."""
+        if given is not None:
+            return {"source": "given", "range": list(given)}
+        return {"source": "learned from the returns seen", "range": self.export()}

@@ -62,7 +62,7 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
-from teacher_service.teachers.performance import KUKA_REWARD_RANGE, RewardRange, check_reward_range, performance
+from teacher_service.teachers.performance import ReturnScale, RewardRange, check_reward_range, scored
 
 MIN_SPREAD = 1e-3
 MAX_SPREAD = 1.0
@@ -103,12 +103,14 @@ class SelfPacedParams(TeacherParams):
     """Most KL divergence between successive Gaussians (TeachMyAgent's benchmark: 0.1)."""
     update_every: int = Field(default=100, ge=10, le=1000)
     """Results between two updates; each update sees only the results since the last one."""
-    reward_range: RewardRange = list(KUKA_REWARD_RANGE)
-    """Returns mapped onto [0, 1] for results without ``success`` (KUKA default: [0, 10])."""
+    reward_range: RewardRange | None = None
+    """Returns mapped onto [0, 1] for results without ``success``; null learns it: from the lowest to
+    the highest return seen so far (``train`` gives the KUKA families [0, 10])."""
 
     @model_validator(mode="after")
     def _consistent(self) -> SelfPacedParams:
-        check_reward_range(self.reward_range)
+        if self.reward_range is not None:
+            check_reward_range(self.reward_range)
         return self
 
 
@@ -303,7 +305,9 @@ def _pull_back(found: np.ndarray, acceptable: Callable[[np.ndarray], bool]) -> n
 
 
 class SelfPacedTeacher(Teacher):
-    """One Gaussian over tasks, moved toward a target while the student keeps up (see the module docstring)."""
+    """One Gaussian over tasks, moved toward a target while the student keeps up. Scale: success when
+    results carry it, else returns placed in ``reward_range``, learned from the returns seen when not
+    given."""
 
     kind = "self-paced"
     Params = SelfPacedParams
@@ -323,7 +327,8 @@ class SelfPacedTeacher(Teacher):
         else:
             self.target = Gaussian(np.full(dims, 0.5), np.full(dims, np.log(UNIFORM_SPREAD)))
         self.points: list[np.ndarray] = []
-        self.scores: list[float] = []
+        self.outcomes: list[tuple[float, bool | None]] = []
+        self.scale = ReturnScale()
         self.updates = 0
         self.moves: deque[dict[str, Any]] = deque(maxlen=RECENT_MOVES)
 
@@ -336,10 +341,16 @@ class SelfPacedTeacher(Teacher):
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         self.points.append(self.space.to_unit(self.space.to_array(result.task)))
-        self.scores.append(performance(result, self.params.reward_range))
-        if len(self.scores) == self.params.update_every:
+        self.outcomes.append((result.reward, result.success))
+        self.scale.see(result.reward)
+        if len(self.outcomes) == self.params.update_every:
             self._update()
         return None
+
+    def _scores(self) -> list[float]:
+        """Performance of the results since the last update, returns placed in the range as it stands."""
+        reward_range = self.scale.range(self.params.reward_range)
+        return [scored(reward, success, reward_range) for reward, success in self.outcomes]
 
     def _update(self) -> None:
         """Re-choose the Gaussian from the results since the last update (inline: milliseconds)."""
@@ -347,7 +358,7 @@ class SelfPacedTeacher(Teacher):
             self.gaussian,
             self.target,
             np.array(self.points),
-            np.array(self.scores),
+            np.array(self._scores()),
             self.params.zeta,
             self.params.kl_limit,
         )
@@ -366,7 +377,7 @@ class SelfPacedTeacher(Teacher):
         self.gaussian = step.gaussian
         self.updates += 1
         self.points.clear()
-        self.scores.clear()
+        self.outcomes.clear()
 
     def _task(self, unit: np.ndarray) -> Task:
         return self.space.from_array(self.space.from_unit(unit))
@@ -384,8 +395,9 @@ class SelfPacedTeacher(Teacher):
             "kl_to_target": kl_divergence(self.gaussian, self.target)[0],
             "bar": self.params.zeta,
             "updates": self.updates,
-            "next_update_at_results": self.results_seen + self.params.update_every - len(self.scores),
-            "recent_performance": statistics.fmean(self.scores) if self.scores else None,
+            "next_update_at_results": self.results_seen + self.params.update_every - len(self.outcomes),
+            "recent_performance": statistics.fmean(self._scores()) if self.outcomes else None,
+            "reward_scale": self.scale.describe(self.params.reward_range),
             "moves": list(self.moves),
         }
 
@@ -394,7 +406,8 @@ class SelfPacedTeacher(Teacher):
             "mean": self.gaussian.mean.tolist(),
             "log_std": self.gaussian.log_std.tolist(),
             "points": [point.tolist() for point in self.points],
-            "scores": list(self.scores),
+            "outcomes": [[reward, success] for reward, success in self.outcomes],
+            "return_scale": self.scale.export(),
             "updates": self.updates,
             "moves": list(self.moves),
         }
@@ -408,6 +421,9 @@ class SelfPacedTeacher(Teacher):
             )
         self.gaussian = Gaussian(mean, log_std)
         self.points = [np.array(point, dtype=np.float64) for point in state["points"]]
-        self.scores = [float(score) for score in state["scores"]]
+        self.outcomes = [
+            (float(reward), None if success is None else bool(success)) for reward, success in state["outcomes"]
+        ]
+        self.scale = ReturnScale(state["return_scale"])
         self.updates = int(state["updates"])
         self.moves.extend(state["moves"])

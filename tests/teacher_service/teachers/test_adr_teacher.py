@@ -158,3 +158,26 @@ def test_bad_parameters_are_rejected_by_name(params: dict[str, Any], message: st
 def test_needs_a_start() -> None:
     with pytest.raises(ValueError, match="start: none given"):
         make_teacher("adr", TaskSpace([Parameter("x", 0.0, 1.0)]), 0)
+
+
+def test_without_a_reward_range_a_queue_is_judged_between_the_lowest_and_highest_return_seen() -> None:
+    teacher = adr()
+    for reward in (0.0, 0.1, 0.2, 0.3, 0.4):
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=reward))
+    assert teacher.state()["moves"] == [], "a rising queue averages half way between 0 and 0.4"
+    assert teacher.state()["reward_scale"] == {"source": "learned from the returns seen", "range": [0.0, 0.4]}
+    for _ in range(4):
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=0.4))
+    restored = adr()
+    restored.restore(json.loads(json.dumps(teacher.snapshot())), teacher.history(0))
+    for copy in (teacher, restored):
+        copy.learn_and_fit(EpisodeResult(copy.sample(1)[0], reward=0.4))
+        assert copy.state()["widened"] == 2, "five returns at the best seen: both open boundaries widen"
+        assert [move["performance"] for move in copy.state()["moves"]] == [1.0, 1.0]
+
+
+def test_returns_that_never_differ_score_nothing_until_they_do() -> None:
+    teacher = adr()
+    for _ in range(5):
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=3.0))
+    assert teacher.state()["widened"] == 0 and teacher.state()["reward_scale"]["range"] == [3.0, 3.0]

@@ -10,6 +10,7 @@ import pytest
 
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE
+from learner.config import KUKA_TEACHER_PARAMS
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 
@@ -27,7 +28,9 @@ def book_increase_difficulty(lesson: dict[str, float]) -> dict[str, float]:
 
 
 def manual(**params: Any) -> Teacher:
-    return make_teacher("manual", KUKA_TASK_SPACE, 0, {"window": 10, "min_episodes": 4, **params})
+    """The book's plan with what ``train`` registers it with over the KUKA space (mean reward 5.5)."""
+    kuka = KUKA_TEACHER_PARAMS["manual"]
+    return make_teacher("manual", KUKA_TASK_SPACE, 0, {"window": 10, "min_episodes": 4, **kuka, **params})
 
 
 def report(teacher: Teacher, rewards: list[float], task: dict[str, float] | None = None) -> None:
@@ -132,7 +135,7 @@ def test_a_space_that_is_not_the_books_gets_lessons_interpolated_to_the_hardest_
 
 def test_lessons_given_as_a_list_are_handed_out_in_order() -> None:
     plan = [{"gravity": 2.0, "mass": 1.5}, {"gravity": 12.0, "mass": 0.5}, {"gravity": 7.0, "mass": 1.0}]
-    teacher = make_teacher("manual", DIFFICULTY, 0, {"lessons": plan, "window": 2, "min_episodes": 2})
+    teacher = make_teacher("manual", DIFFICULTY, 0, {"lessons": plan, "window": 2, "min_episodes": 2, "threshold": 5.5})
     for lesson in plan:
         assert teacher.sample(3) == [lesson] * 3
         report(teacher, [6.0] * 2)
@@ -191,7 +194,7 @@ def test_the_success_rate_can_decide_and_results_without_it_are_left_out() -> No
     ("params", "message"),
     [
         ({"lessons": [{"gravity": 2.0, "mass": 0.5}], "steps": 3}, "not both"),
-        ({"metric": "success"}, r"success-rate threshold lies in \[0, 1\)"),
+        ({"metric": "success", "threshold": 5.5}, r"success-rate threshold lies in \[0, 1\)"),
         ({"threshold": 1.0, "step_back_below": 1.0}, "must be below threshold"),
         ({"lessons": [{"gravity": 20.0, "mass": 0.5}]}, r"lessons\[0\]: task parameter 'gravity'=20.0 is outside"),
         ({"start": DIFFICULTY.hardest()}, "lessons 0 and 1 of the plan are the same task"),
@@ -253,3 +256,36 @@ def test_a_restored_plan_keeps_its_lesson_window_and_moves() -> None:
         report(teacher, [0.0, 6.0, 0.0, 0.0, 7.0, 7.0])
     assert restored.state() == original.state()
     assert restored.sample(3) == original.sample(3)
+
+
+def test_without_a_threshold_it_moves_on_at_three_quarters_of_the_rewards_seen() -> None:
+    teacher = make_teacher("manual", DIFFICULTY, 0, {"window": 4, "min_episodes": 4})
+    report(teacher, [0.0, 0.0, 0.0, 0.0])
+    assert teacher.state()["threshold"] is None, "no spread of rewards yet: nothing to compare with"
+    report(teacher, [0.8, 0.8, 0.8])
+    assert teacher.state()["lesson"] == 0, "mean 0.6 of a range [0, 0.8] is not past 0.6"
+    report(teacher, [0.8])
+    state = teacher.state()
+    assert state["lesson"] == 1 and state["threshold_source"] == "learned"
+    assert state["threshold"] == pytest.approx(0.6) and state["rewards_seen"] == [0.0, 0.8]
+    assert "0.75 of the way from the lowest to the highest reward seen" in state["moves"][0]["why"]
+    # The range learned on one lesson carries on: the next needs 0.6 in the same units.
+    report(teacher, [0.5] * 4)
+    assert teacher.state()["lesson"] == 1
+    restored = make_teacher("manual", DIFFICULTY, 0, {"window": 4, "min_episodes": 4})
+    restored.restore(json.loads(json.dumps(teacher.snapshot())), teacher.history(0))
+    assert restored.state()["threshold"] == pytest.approx(0.6)
+
+
+def test_success_metric_without_a_threshold_moves_on_at_three_quarters_success() -> None:
+    teacher = make_teacher("manual", DIFFICULTY, 0, {"window": 8, "min_episodes": 4, "metric": "success"})
+    for success in (True, True, False, True):
+        teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], 0.0, success=success))
+    assert teacher.state()["lesson"] == 0, "0.75 does not exceed 0.75"
+    teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], 0.0, success=True))
+    assert teacher.state()["lesson"] == 1, "4 successes in 5"
+
+
+def test_stepping_back_needs_a_threshold_in_the_same_units() -> None:
+    with pytest.raises(ValueError, match="step_back_below needs a threshold in the same units: give threshold"):
+        make_teacher("manual", DIFFICULTY, 0, {"step_back_below": 0.0})

@@ -134,6 +134,16 @@ def test_the_bar_is_on_the_scaled_return_without_success() -> None:
     assert above.state()["moves"][0]["why"] == "toward the target"
 
 
+def test_without_a_reward_range_the_bar_is_on_returns_placed_between_the_lowest_and_highest_seen() -> None:
+    below, above = spdl(), spdl()
+    for teacher, best in ((below, 5), (above, 15)):
+        for index in range(50):
+            teacher.learn_and_fit(EpisodeResult(teacher.sample(1)[0], reward=-20.0 if index >= best else 40.0))
+    assert below.state()["moves"][0]["why"].startswith("below the bar"), "5 of 50 at the best return: 0.1"
+    assert above.state()["moves"][0]["why"] == "toward the target", "15 of 50: 0.3"
+    assert above.state()["reward_scale"] == {"source": "learned from the returns seen", "range": [-20.0, 40.0]}
+
+
 def test_a_restored_teacher_continues_the_same_run() -> None:
     original = spdl()
     student = ReachStudent(0.1, growth=0.002)
