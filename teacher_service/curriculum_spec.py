@@ -19,6 +19,7 @@ from teacher_service.teachers.adr import AdrParams
 from teacher_service.teachers.alp_gmm import AlpGmmParams
 from teacher_service.teachers.covar_gmm import CovarGmmParams
 from teacher_service.teachers.currot import CurrotParams
+from teacher_service.teachers.learnability import LearnabilityParams
 from teacher_service.teachers.manual import ManualParams
 from teacher_service.teachers.riac import RiacParams
 from teacher_service.teachers.self_paced import SelfPacedParams
@@ -83,6 +84,11 @@ class RiacCurriculum(TypedSpec):
     params: RiacParams = Field(default_factory=RiacParams)
 
 
+class LearnabilityCurriculum(TypedSpec):
+    teacher: Literal["learnability"]
+    params: LearnabilityParams = Field(default_factory=LearnabilityParams)
+
+
 CurriculumRequest = Annotated[
     AlpGmmCurriculum
     | ManualCurriculum
@@ -92,7 +98,8 @@ CurriculumRequest = Annotated[
     | SelfPacedCurriculum
     | CurrotCurriculum
     | CovarGmmCurriculum
-    | RiacCurriculum,
+    | RiacCurriculum
+    | LearnabilityCurriculum,
     Field(discriminator="teacher"),
 ]
 """The body of ``PUT /api/v1/curricula/{name}``."""
@@ -109,6 +116,7 @@ SPEC_CLASSES: dict[str, type[TypedSpec]] = {
         CurrotCurriculum,
         CovarGmmCurriculum,
         RiacCurriculum,
+        LearnabilityCurriculum,
     )
 }
 

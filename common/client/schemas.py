@@ -16,7 +16,9 @@ from common.client.task_space import Parameter, Task, TaskSpace
 
 API_PREFIX = "/api/v1"
 
-TeacherKind = Literal["alp-gmm", "manual", "random", "fixed", "adr", "self-paced", "currot", "covar-gmm", "riac"]
+TeacherKind = Literal[
+    "alp-gmm", "manual", "random", "fixed", "adr", "self-paced", "currot", "covar-gmm", "riac", "learnability"
+]
 
 CURRICULUM_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_TASKS_PER_REQUEST = 1024

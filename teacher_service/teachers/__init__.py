@@ -16,6 +16,7 @@ from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.covar_gmm import CovarGmmTeacher
 from teacher_service.teachers.currot import CurrotTeacher
+from teacher_service.teachers.learnability import LearnabilityTeacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.riac import RiacTeacher
@@ -35,6 +36,7 @@ TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
             CurrotTeacher,
             CovarGmmTeacher,
             RiacTeacher,
+            LearnabilityTeacher,
         )
     }
 )

@@ -318,6 +318,14 @@ def assert_state_drawn(page: Page, teacher: dict[str, Any], x: str, y: str) -> N
         drawn = space["particles"][0]
         assert drawn["x"] == pytest.approx([p[x] for p in teacher["particles"]])
         assert drawn["y"] == pytest.approx([p[y] for p in teacher["particles"]])
+    if teacher.get("pool"):
+        drawn = space["pool"][0]
+        assert drawn["x"] == pytest.approx([p[x] for p in teacher["pool"]])
+        assert drawn["y"] == pytest.approx([p[y] for p in teacher["pool"]])
+        colours = page.evaluate(
+            "() => Array.from(document.getElementById('space-plot').data.find(t => t.meta === 'pool').marker.color)"
+        )
+        assert colours == pytest.approx(teacher["pool_learnability"]), "the pool is coloured by p(1 - p)"
     if "plan" in teacher:
         assert space["plan"][0]["x"] == pytest.approx([lesson[x] for lesson in teacher["plan"]])
         assert space["plan"][0]["y"] == pytest.approx([lesson[y] for lesson in teacher["plan"]])
@@ -388,7 +396,8 @@ def test_a_lesson_plan_that_steps_back_shows_its_lessons_and_moves(browser: Brow
 
 def test_regions_bounds_and_particles_are_drawn_by_the_conventions(browser: Browser, service: ServiceProcess) -> None:
     """The state entries that kinds on other branches publish (RIAC's regions, ADR's bounds,
-    CURROT's particles), handed to the page's own renderers as the conventions shape them."""
+    CURROT's particles, the learnability teacher's pool), handed to the page's own renderers as the
+    conventions shape them."""
     create_curriculum(service, "conventions", "random", {})
     train(service, "conventions", 10, batch=10)
     page, problems = open_page(browser, f"{service.url}/curricula/conventions", service)
@@ -404,10 +413,14 @@ def test_regions_bounds_and_particles_are_drawn_by_the_conventions(browser: Brow
         "bounds": {"low": low, "high": {"a": 0.25, "b": 1.5}, "low_boundary_probability": 0.5},
         "particles": [{"a": 0.1, "b": 1.1}, {"a": 0.2, "b": 1.9}],
         "particle_values": [1.0, 2.0],
+        "pool": [{"a": 0.3, "b": 1.2}, {"a": 0.9, "b": 1.8}],
+        "pool_success": [0.5, 0.9],
+        "pool_learnability": [0.25, 0.09],
     }
     drawn = page.evaluate(
         """teacher => [...stateBackdrop(teacher, "a", "b"), ...stateMarks(teacher, "a", "b")].map(t => ({
-            meta: t.meta, x: t.x, y: t.y, fill: t.fillcolor ?? null,
+            meta: t.meta, x: t.x, y: t.y, fill: t.fillcolor ?? null, colour: t.marker?.color ?? null,
+            colourMax: t.marker?.cmax ?? null,
         }))""",
         teacher,
     )
@@ -420,5 +433,8 @@ def test_regions_bounds_and_particles_are_drawn_by_the_conventions(browser: Brow
     assert by_meta["bounds"][0]["x"] == [0.0, 0.25, 0.25, 0.0, 0.0]
     assert by_meta["bounds"][0]["y"] == [1.0, 1.0, 1.5, 1.5, 1.0]
     assert (by_meta["particles"][0]["x"], by_meta["particles"][0]["y"]) == ([0.1, 0.2], [1.1, 1.9])
+    pool = by_meta["pool"][0]
+    assert (pool["x"], pool["y"]) == ([0.3, 0.9], [1.2, 1.8])
+    assert (pool["colour"], pool["colourMax"]) == ([0.25, 0.09], 0.25), "p(1 - p) on its own scale, 0 to 0.25"
     assert problems == PageProblems()
     page.close()

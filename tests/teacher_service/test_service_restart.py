@@ -44,9 +44,9 @@ def _as_json(value: Any) -> Any:
 class Mirror:
     """Drives the service and an in-process reference teacher through the same history."""
 
-    def __init__(self, api: httpx.Client, kind: str) -> None:
+    def __init__(self, api: httpx.Client, kind: str, params: dict[str, Any]) -> None:
         self.api = api
-        self.reference = make_teacher(kind, KUKA_TASK_SPACE, SEED, KIND_PARAMS[kind])
+        self.reference = make_teacher(kind, KUKA_TASK_SPACE, SEED, params)
         self.due: list[FitJob] = []
         self.reported: list[dict[str, Any]] = []
 
@@ -92,7 +92,7 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
             ).status_code
             == 201
         )
-        mirror = Mirror(api, kind)
+        mirror = Mirror(api, kind, KIND_PARAMS[kind])
         mirror.report(mirror.draw(8))
         mirror.report(mirror.draw(8))  # result 16: fit 0 falls due (and starts the fit process)
         drawn_during_fit = mirror.draw(8)
@@ -137,6 +137,38 @@ def test_sigkill_then_restart_gives_the_same_teacher(tmp_path, fit_processes, ki
             "duplicates": 2,
             "expired": 0,
         }
+        api.close()
+    finally:
+        service.stop()
+
+
+def test_sigkill_then_restart_gives_the_same_learnability_teacher(tmp_path):
+    """A kind without fits: its pool is refreshed inline, every 16 results here, from the last 40;
+    the restart rebuilds it from a snapshot (every 20 results) and the results after it."""
+    space = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
+    params = {"pool_size": 30, "update_every": 16, "buffer_size": 40, "top_k": 8}
+    service = ServiceProcess(tmp_path / "teacher.db", env={"KC_SNAPSHOT_EVERY": "20"}).start()
+    try:
+        api = httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0)
+        spec = {"teacher": "learnability", "space": space, "params": params, "seed": SEED}
+        assert api.put(f"/curricula/{NAME}", json=spec).status_code == 201
+        mirror = Mirror(api, "learnability", params)
+        for _ in range(9):
+            mirror.report(mirror.draw(7))  # 63 results: 3 pools, the oldest results out of the window
+        unreported = mirror.draw(3)
+        before = mirror.counters()
+        assert mirror.reference.state()["refreshes"] == 3
+        service.kill()
+        service.start()
+
+        after = mirror.counters()
+        for counter in ("tasks_issued", "results_received", "tasks_outstanding"):
+            assert after[counter] == before[counter]
+        state = api.get(f"/curricula/{NAME}/state").json()
+        assert state["teacher"] == _as_json(mirror.reference.state())
+        mirror.report(unreported)
+        mirror.report(mirror.draw(10))  # the next pool, refreshed after the restart, matches too
+        assert api.get(f"/curricula/{NAME}/state").json()["teacher"] == _as_json(mirror.reference.state())
         api.close()
     finally:
         service.stop()

@@ -608,6 +608,7 @@ function lessonRule(teacher) {
 /* ---------- each teacher's own state, keyed on the state's entries (not on kind names) ---------- */
 
 const REGION_SCALE = [[0, "#e0f2fe"], [0.5, "#38bdf8"], [1, "#075985"]];
+const LEARNABILITY_SCALE = [[0, "#e5e7eb"], [0.5, "#f59e0b"], [1, "#9a3412"]];
 const STATE_SHOWN_ELSEWHERE = new Set(["kind", "seed", "params", "tasks_sampled", "results_seen"]);
 const MOVES_LISTED = 50;
 
@@ -660,9 +661,26 @@ function stateBackdrop(teacher, xName, yName) {
   return traces;
 }
 
-/** Traces drawn over the tasks: `particles` and the task the teacher hands out now (a lesson or a fixed point). */
+/** Traces drawn over the tasks: a candidate `pool` coloured by `pool_learnability`, `particles` and
+ * the task the teacher hands out now (a lesson or a fixed point). */
 function stateMarks(teacher, xName, yName) {
   const traces = [];
+  const pool = teacher.pool ?? [];
+  if (pool.length) {
+    const scores = teacher.pool_learnability ?? pool.map(() => 0);
+    const success = teacher.pool_success ?? pool.map(() => null);
+    traces.push({
+      meta: "pool", name: "candidate pool", type: "scatter", mode: "markers",
+      x: pool.map((p) => p[xName]), y: pool.map((p) => p[yName]),
+      customdata: pool.map((_, k) => [scores[k], success[k]]),
+      marker: {
+        size: 9, symbol: "square-open", line: { width: 2 }, color: scores, cmin: 0, cmax: 0.25,
+        colorscale: LEARNABILITY_SCALE,
+        colorbar: { title: { text: "p(1−p)", side: "right" }, x: 1.13, xpad: 8, thickness: 12, len: 0.9 },
+      },
+      hovertemplate: "candidate<br>p(1−p) %{customdata[0]:.3f}<br>p %{customdata[1]:.2f}<extra></extra>",
+    });
+  }
   const particles = teacher.particles ?? [];
   if (particles.length) {
     const values = teacher.particle_values ?? null;

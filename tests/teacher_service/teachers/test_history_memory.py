@@ -26,6 +26,7 @@ BOUNDED: dict[str, tuple[dict[str, Any], int, int]] = {
         8_000,
         2 * (100 + 4 * 50 + 2 * RELEASE_EVERY),
     ),
+    "learnability": ({"buffer_size": 300, "update_every": 50}, 8_000, 2 * (300 + 2 * RELEASE_EVERY)),
 }
 
 

@@ -24,6 +24,7 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "currot": {"particles": 40, "update_every": 20, "buffer_size": 60, "candidates": 8, "delta": 0.0},
     "covar-gmm": {"fit_rate": 40, "max_components": 4},
     "riac": {"max_region_size": 30},
+    "learnability": {"pool_size": 40, "update_every": 20, "buffer_size": 60, "top_k": 10},
 }
 
 
@@ -130,6 +131,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
         "currot": ("fits", 3),
         "covar-gmm": ("fits", 3),
         "riac": ("splits", 2),
+        "learnability": ("refreshes", 3),
     }
     if kind in learned:
         entry, least = learned[kind]
