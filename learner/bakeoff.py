@@ -2,8 +2,9 @@
 
 The command trains every teacher x seed as its own ``train`` run (``bakeoff_runs``: resumable at
 every point, so running the same command again carries on after Ctrl-C or a crash), evaluates each
-final policy on the hardest task as soon as that run is trained, sums the runs up per teacher
-(``bakeoff_statistics``) and writes the results (``bakeoff_report``).
+final policy on the hardest task as soon as that run is trained, plays the scripted controller on the
+same episode seeds, sums the runs up per teacher (``bakeoff_statistics``) and writes the results
+(``bakeoff_report``).
 """
 
 from __future__ import annotations
@@ -15,7 +16,14 @@ from pathlib import Path
 
 from common.kuka import ENV_IDS
 from learner.arguments import UsageError, add_override_flags, int_at_least, positive_int
-from learner.bakeoff_report import LEARNING_CURVES, RESULTS_JSON, RESULTS_MARKDOWN, write_reports
+from learner.bakeoff_report import (
+    LEARNING_CURVES,
+    PLACEMENT_PLOT,
+    RESULTS_JSON,
+    RESULTS_MARKDOWN,
+    SCRIPTED_EVALUATION,
+    write_reports,
+)
 from learner.bakeoff_runs import (
     TRAINING_FLAGS,
     Run,
@@ -28,7 +36,7 @@ from learner.bakeoff_runs import (
     train_runs,
 )
 from learner.bakeoff_statistics import TeacherResult
-from learner.checkpoint_evaluation import EvaluationResult
+from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
 from learner.config import LOOPS, TEACHERS, TrainConfig
 
 
@@ -161,7 +169,16 @@ def _bakeoff(args: argparse.Namespace) -> int:
         teacher_runs = tuple(run for run in runs if run.teacher == teacher) + further
         evaluations = tuple(evaluate(run) for run in teacher_runs)
         results.append(TeacherResult(teacher, teacher_runs, evaluations, args.env))
-    write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed)
-    for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES):
+    scripted = scripted_evaluation(
+        args.out / SCRIPTED_EVALUATION,
+        args.env,
+        args.eval_episodes,
+        args.eval_seed,
+        args.eval_processes,
+        args.max_episode_steps,
+    )
+    print(f"scripted controller: {scripted.summary()}")
+    write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed, scripted)
+    for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES, PLACEMENT_PLOT):
         print(args.out / name)
     return 0

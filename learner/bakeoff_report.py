@@ -1,5 +1,6 @@
 """The bake-off's report: ``results.json`` (every figure, per seed included), ``results.md`` (the
-tables a person reads) and ``learning_curves.png`` (hardest-task success during training).
+tables a person reads), ``learning_curves.png`` (hardest-task success during training) and
+``success_by_placement.png`` (where each teacher's students fail, the scripted controller beside them).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import numpy as np
 
 from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
+from common.kuka.arm import TARGET_X_RANGE
+from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import task_space_for
 from learner.bakeoff_runs import learning_curve
 from learner.bakeoff_statistics import (
@@ -23,7 +26,9 @@ from learner.bakeoff_statistics import (
     TeacherResult,
     median_steps,
 )
+from learner.checkpoint_evaluation import EvaluationResult
 from learner.config import TrainConfig
+from learner.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
 from learner.json_file import write_json
 from learner.stats import CONFIDENCE, Interval
 
@@ -44,6 +49,10 @@ BOOK_RETURNS = {"alp-gmm": 3.71, "fixed": 2.81, "manual": -2.79}
 RESULTS_JSON = "results.json"
 RESULTS_MARKDOWN = "results.md"
 LEARNING_CURVES = "learning_curves.png"
+PLACEMENT_PLOT = "success_by_placement.png"
+SCRIPTED_EVALUATION = "scripted_evaluation.json"
+"""The scripted controller's episodes on the final evaluation's seeds, cached beside the report."""
+SCRIPTED_LABEL = "Scripted controller (no learning)"
 
 
 def teacher_record(result: TeacherResult) -> dict[str, Any]:
@@ -58,6 +67,7 @@ def teacher_record(result: TeacherResult) -> dict[str, Any]:
         "return": result.returns.to_dict(),
         "success_rate": result.success_rate.to_dict(),
         "book_return": BOOK_RETURNS.get(result.teacher) if result.env == ENV_ID else None,
+        **placement_record(result.diagnosed),
         "runs": [
             {
                 "seed": run.seed,
@@ -77,6 +87,60 @@ def teacher_record(result: TeacherResult) -> dict[str, Any]:
             )
         ],
     }
+
+
+def placement_record(diagnosed: Sequence[tuple[EpisodeDiagnostics, bool]]) -> dict[str, Any]:
+    """Success by placement band and how many failures lay beyond the clamp; None for episodes evaluated
+    before they recorded where their block lay."""
+    if not diagnosed:
+        return {"success_by_placement": None, "failures_beyond_clamp": None}
+    outside, failures = failures_outside(diagnosed)
+    return {
+        "success_by_placement": [band.to_dict() for band in success_by_band(diagnosed)],
+        "failures_beyond_clamp": {"beyond": outside, "failures": failures},
+    }
+
+
+def placement_rows(
+    results: Sequence[TeacherResult], scripted: EvaluationResult | None
+) -> list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]]:
+    """The placement table's rows: each teacher with diagnosed episodes, then the scripted controller."""
+    rows: list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]] = [
+        (f"{TEACHER_LABELS[result.teacher]} ({len(result.runs)} seeds)", result.diagnosed)
+        for result in results
+        if result.diagnosed
+    ]
+    if scripted is not None and scripted.diagnostics:
+        rows.append((SCRIPTED_LABEL, scripted.diagnosed()))
+    return rows
+
+
+def placement_markdown(results: Sequence[TeacherResult], scripted: EvaluationResult | None) -> list[str]:
+    """The section that says where the students fail, or nothing when no episode recorded its placement."""
+    rows = placement_rows(results, scripted)
+    if not rows:
+        return []
+    missing = [TEACHER_LABELS[result.teacher] for result in results if not result.diagnosed]
+    low, high = TARGET_X_RANGE
+    return [
+        "## Where the students fail: success by block placement",
+        "",
+        f"The arm's IK target is clamped to x in [{low:.2f}, {high:.2f}]; a block beyond it can only be grasped "
+        "by hanging the fingers over its end. Success of the final evaluations, pooled over a teacher's seeds, "
+        "by how far the block lay beyond the clamp in x (episodes in brackets); the straight-ahead column "
+        "counts again blocks the last bands hold. The scripted controller, which reads only the observation, "
+        "played the same episode seeds.",
+        "",
+        *band_table(rows),
+        "",
+        *(
+            [f"Evaluated before episodes recorded their placement, so left out: {', '.join(missing)}.", ""]
+            if missing
+            else []
+        ),
+        f"![Success by block placement]({PLACEMENT_PLOT})",
+        "",
+    ]
 
 
 def _format_return(interval: Interval) -> str:
@@ -113,7 +177,13 @@ def registration_params(teacher: str, settings: dict[str, Any]) -> dict[str, Any
     return TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=overrides).teacher_params
 
 
-def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int) -> str:
+def results_markdown(
+    results: Sequence[TeacherResult],
+    settings: dict[str, Any],
+    episodes: int,
+    seed: int,
+    scripted: EvaluationResult | None = None,
+) -> str:
     trained = ", ".join(
         _format_setting(name, value)
         for name, value in settings.items()
@@ -195,6 +265,7 @@ def results_markdown(results: Sequence[TeacherResult], settings: dict[str, Any],
         "",
         f"![Hardest-task evaluations during training]({LEARNING_CURVES})",
         "",
+        *placement_markdown(results, scripted),
     ]
     return "\n".join(lines)
 
@@ -255,8 +326,15 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
 
 
 def write_reports(
-    out: Path, results: Sequence[TeacherResult], settings: dict[str, Any], episodes: int, seed: int
+    out: Path,
+    results: Sequence[TeacherResult],
+    settings: dict[str, Any],
+    episodes: int,
+    seed: int,
+    scripted: EvaluationResult | None = None,
 ) -> None:
+    """Every report file; ``scripted`` is the scripted controller on the same episode seeds, for beside the
+    teachers in the placement table."""
     write_json(
         out / RESULTS_JSON,
         {
@@ -269,7 +347,17 @@ def write_reports(
                 "confidence": CONFIDENCE,
             },
             "teachers": [teacher_record(result) for result in results],
+            "scripted": None
+            if scripted is None
+            else {
+                "success_rate": scripted.success_rate.to_dict(),
+                "return": scripted.returns.to_dict(),
+                **placement_record(scripted.diagnosed()),
+            },
         },
     )
-    (out / RESULTS_MARKDOWN).write_text(results_markdown(results, settings, episodes, seed), encoding="utf-8")
+    (out / RESULTS_MARKDOWN).write_text(results_markdown(results, settings, episodes, seed, scripted), encoding="utf-8")
     plot_learning_curves(out / LEARNING_CURVES, results)
+    rows = placement_rows(results, scripted)
+    if rows:
+        plot_bands(out / PLACEMENT_PLOT, rows)

@@ -13,6 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from common.kuka import ENV_ID
+from common.kuka.diagnostics import EpisodeDiagnostics
 from learner.bakeoff_runs import Run, learning_curve
 from learner.checkpoint_evaluation import EvaluationResult
 from learner.stats import Interval, mean_interval, wilson_interval
@@ -63,6 +64,14 @@ class TeacherResult:
     def success_rate(self) -> Interval:
         episodes = [episode for result in self.evaluations for episode in result.episodes]
         return wilson_interval(sum(episode.success for episode in episodes), len(episodes))
+
+    @property
+    def diagnosed(self) -> list[tuple[EpisodeDiagnostics, bool]]:
+        """Every seed's evaluation episodes with their diagnostics; empty if any evaluation predates them, as
+        a table over some seeds only would pass for the teacher's."""
+        if not all(result.diagnostics for result in self.evaluations):
+            return []
+        return [pair for result in self.evaluations for pair in result.diagnosed()]
 
     @property
     def seed_returns(self) -> list[float]:

@@ -1,20 +1,23 @@
 """A policy's deterministic score on one task, with error bars: the final evaluation of ``evaluate``
 and ``bakeoff``.
 
-The deterministic policy (the Gaussian's mean) plays a fixed number of episodes on one task.
-Episode ``i`` is seeded ``seed + i`` and the results are put back in episode order, so the figures
-depend on the policy, the task and the seed only, never on how many processes shared the work.
-Processes are plain CPU workers (no Ray, no teacher): evaluation must work on a laptop with
-nothing else running.
+The deterministic policy (the Gaussian's mean), or the scripted controller it is read against, plays a
+fixed number of episodes on one task. Episode ``i`` is seeded ``seed + i`` and the results are put back
+in episode order, so the figures depend on the policy, the task and the seed only, never on how many
+processes shared the work. Each episode also records where its block lay and how the gripper met it
+(``common.kuka.diagnostics``). Processes are plain CPU workers (no Ray, no teacher): evaluation must
+work on a laptop with nothing else running.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from concurrent.futures import as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
+from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
@@ -23,15 +26,18 @@ from tqdm import tqdm
 
 from common.client.task_space import Task, TaskSpace
 from common.kuka import ENV_ID
+from common.kuka.diagnostics import Controller, EpisodeDiagnostics, play_episode
 from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.scripted import scripted_action
 from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats
 from learner.checkpoint import Checkpoint
+from learner.episode_diagnostics import success_by_band
+from learner.json_file import write_json
 from learner.kuka_policy import policy_snapshot
 from learner.process_pool import StoppablePool
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
-from rollout_worker.sampler import run_episodes
 
 
 def describe_task(task: Task, space: TaskSpace = KUKA_TASK_SPACE) -> str:
@@ -52,6 +58,8 @@ class EvaluationResult:
     episodes: tuple[EpisodeStats, ...]
     env: str = ENV_ID
     """The environment the episodes were played in; ``task`` is a point of its task space."""
+    diagnostics: tuple[EpisodeDiagnostics, ...] = ()
+    """Per episode, in the same order; empty for results written before episodes recorded them."""
 
     @property
     def returns(self) -> Interval:
@@ -79,7 +87,14 @@ class EvaluationResult:
         """The environment, named where it is not the default one."""
         return "" if self.env == ENV_ID else f"{self.env}, "
 
+    def diagnosed(self) -> list[tuple[EpisodeDiagnostics, bool]]:
+        """Each episode's diagnostics and success, for the placement-band tables; empty without diagnostics."""
+        return [
+            (diagnostics, episode.success) for diagnostics, episode in zip(self.diagnostics, self.episodes, strict=True)
+        ]
+
     def to_dict(self) -> dict[str, Any]:
+        diagnostics = [each.to_dict() for each in self.diagnostics]
         return {
             "env": self.env,
             "task": self.task,
@@ -93,7 +108,13 @@ class EvaluationResult:
                 "return": [episode.reward for episode in self.episodes],
                 "success": [episode.success for episode in self.episodes],
                 "length": [episode.length for episode in self.episodes],
+                **({name: [each[name] for each in diagnostics] for name in diagnostics[0]} if diagnostics else {}),
             },
+            **(
+                {"success_by_placement": [band.to_dict() for band in success_by_band(self.diagnosed())]}
+                if diagnostics
+                else {}
+            ),
         }
 
     @classmethod
@@ -107,7 +128,16 @@ class EvaluationResult:
                 per_episode["return"], per_episode["success"], per_episode["length"], strict=True
             )
         )
-        return cls(task=task, seed=int(data["seed"]), episodes=episodes, env=env)
+        # Older results lack the diagnostics columns.
+        diagnostics = (
+            tuple(
+                EpisodeDiagnostics.from_dict({name: per_episode[name][index] for name in DIAGNOSTICS_COLUMNS})
+                for index in range(len(episodes))
+            )
+            if all(name in per_episode for name in DIAGNOSTICS_COLUMNS)
+            else ()
+        )
+        return cls(task=task, seed=int(data["seed"]), episodes=episodes, env=env, diagnostics=diagnostics)
 
 
 def available_cpus() -> int:
@@ -115,24 +145,50 @@ def available_cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-_worker: tuple[KukaGraspEnv, InferencePolicy, Task] | None = None
-"""Each pool process's environment, policy and task, built once by ``_start_worker``."""
+DIAGNOSTICS_COLUMNS = (
+    "block_x",
+    "block_y",
+    "block_yaw",
+    "touchdown_block_x",
+    "touchdown_block_y",
+    "off_square_degrees",
+)
+"""The ``per_episode`` columns an ``EpisodeDiagnostics`` is read back from (the others are derived)."""
+
+Played = tuple[EpisodeStats, EpisodeDiagnostics]
 
 
-def _start_worker(snapshot: PolicySnapshot, task: Task, max_episode_steps: int, env_id: str) -> None:
+def controller(snapshot: PolicySnapshot | None) -> Controller:
+    """The deterministic policy of ``snapshot`` (the Gaussian's mean), or the scripted controller for None."""
+    if snapshot is None:
+        return scripted_action
+    policy = InferencePolicy(snapshot)
+    return lambda observation: policy.act(observation[None], deterministic=True)[0][0]
+
+
+_worker: tuple[KukaGraspEnv, Controller, Task] | None = None
+"""Each pool process's environment, controller and task, built once by ``_start_worker``."""
+
+
+def _start_worker(snapshot: PolicySnapshot | None, task: Task, max_episode_steps: int, env_id: str) -> None:
     global _worker
     torch.set_num_threads(1)
-    _worker = (make_kuka_env(env_id, max_steps=max_episode_steps), InferencePolicy(snapshot), task)
+    _worker = (make_kuka_env(env_id, max_steps=max_episode_steps), controller(snapshot), task)
 
 
-def _play_episode(seed: int) -> EpisodeStats:
+def _play(env: KukaGraspEnv, act: Controller, task: Task, seed: int) -> Played:
+    episode = play_episode(env, task, act, seed)
+    return EpisodeStats(task, episode.reward, episode.success, episode.length), episode.diagnostics
+
+
+def _play_episode(seed: int) -> Played:
     assert _worker is not None, "the pool runs _start_worker in each process before any episode"
-    env, policy, task = _worker
-    return run_episodes(env, policy, task, [seed])[0]
+    env, act, task = _worker
+    return _play(env, act, task, seed)
 
 
 def evaluate_policy(
-    snapshot: PolicySnapshot,
+    snapshot: PolicySnapshot | None,
     task: Task,
     episodes: int,
     seed: int = 0,
@@ -141,7 +197,8 @@ def evaluate_policy(
     progress: bool = True,
     env_id: str = ENV_ID,
 ) -> EvaluationResult:
-    """Play ``episodes`` deterministic episodes of ``env_id``, seeded ``seed``, ``seed + 1``, ...
+    """Play ``episodes`` deterministic episodes of ``env_id``, seeded ``seed``, ``seed + 1``, ...; a
+    ``snapshot`` of None plays the scripted controller.
 
     ``processes=None`` uses one process per available CPU (at most one per episode); with one,
     the episodes run in this process.
@@ -153,12 +210,12 @@ def evaluate_policy(
     task = task_space_for(env_id).validate(task)
     processes = min(processes or available_cpus(), episodes)
     seeds = [seed + index for index in range(episodes)]
-    results: list[EpisodeStats | None] = [None] * episodes
+    results: list[Played | None] = [None] * episodes
     with tqdm(total=episodes, desc="evaluating", unit="episode", disable=not progress, dynamic_ncols=True) as bar:
         if processes == 1:
-            env, policy = make_kuka_env(env_id, max_steps=max_episode_steps), InferencePolicy(snapshot)
+            env, act = make_kuka_env(env_id, max_steps=max_episode_steps), controller(snapshot)
             for index, episode_seed in enumerate(seeds):
-                results[index] = run_episodes(env, policy, task, [episode_seed])[0]
+                results[index] = _play(env, act, task, episode_seed)
                 bar.update()
             env.close()
         else:
@@ -174,7 +231,14 @@ def evaluate_policy(
                     results[futures[future]] = future.result()
                     bar.update()
     # Every index was filled above: the loop or the pool answered each seed.
-    return EvaluationResult(task=task, seed=seed, episodes=tuple(cast(list[EpisodeStats], results)), env=env_id)
+    played = cast(list[Played], results)
+    return EvaluationResult(
+        task=task,
+        seed=seed,
+        episodes=tuple(stats for stats, _ in played),
+        env=env_id,
+        diagnostics=tuple(diagnostics for _, diagnostics in played),
+    )
 
 
 def evaluate_checkpoint(
@@ -198,3 +262,23 @@ def evaluate_checkpoint(
         progress,
         checkpoint.config.env,
     )
+
+
+def scripted_evaluation(
+    cache: Path,
+    env_id: str,
+    episodes: int,
+    seed: int,
+    processes: int | None = None,
+    max_episode_steps: int = 1000,
+) -> EvaluationResult:
+    """The scripted controller on ``env_id``'s hardest task, the yardstick beside a bake-off's policies,
+    read from ``cache`` when it holds the same episodes and written there when not."""
+    if cache.exists():
+        cached = EvaluationResult.from_dict(json.loads(cache.read_text(encoding="utf-8")))
+        if (cached.env, cached.seed, len(cached.episodes)) == (env_id, seed, episodes) and cached.diagnostics:
+            return cached
+    task = task_space_for(env_id).hardest()
+    result = evaluate_policy(None, task, episodes, seed, processes, max_episode_steps, env_id=env_id)
+    write_json(cache, {"controller": "scripted", **result.to_dict()})
+    return result

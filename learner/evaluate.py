@@ -1,8 +1,11 @@
-"""``kuka-curriculum evaluate``: how good is a checkpoint, with error bars.
+"""``kuka-curriculum evaluate``: how good is a checkpoint, with error bars, and where it fails.
 
 The deterministic policy plays a fixed number of seeded episodes on one task of the environment it
 was trained on (the checkpoint records it; ``--task`` names a point of its task space); the figures
-come from ``checkpoint_evaluation``.
+come from ``checkpoint_evaluation``. Each episode records where its block lay and how the gripper met
+it, and the printout splits success by how far the block lay beyond the arm's reach.
+``--scripted`` also plays the scripted controller on the same episodes, the yardstick a policy is read
+against; without a checkpoint it plays alone, on ``--env``.
 """
 
 from __future__ import annotations
@@ -11,18 +14,25 @@ import argparse
 import sys
 from pathlib import Path
 
+from common.kuka import ENV_IDS, HARD_V1_ENV_ID
+from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError, positive_int
-from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
-from learner.checkpoint_evaluation import available_cpus, evaluate_checkpoint
+from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
+from learner.checkpoint_evaluation import EvaluationResult, available_cpus, evaluate_checkpoint, evaluate_policy
+from learner.episode_diagnostics import success_by_band
 from learner.json_file import write_json
+
+DEFAULT_MAX_STEPS = 1000
+"""The scripted controller's episode limit when no checkpoint gives one: the environments' default."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "checkpoint",
         type=Path,
+        nargs="?",
         metavar="CHECKPOINT",
-        help="a checkpoint file, or a run directory (its latest checkpoint)",
+        help="a checkpoint file, or a run directory (its latest checkpoint); may be left out with --scripted",
     )
     parser.add_argument("--episodes", type=positive_int, default=100, help="episodes to play (default 100)")
     parser.add_argument("--task", default="hardest", help=TASK_HELP)
@@ -35,31 +45,79 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_int,
         help="episode step limit (default: the one the checkpoint was trained with)",
     )
+    parser.add_argument(
+        "--scripted",
+        action="store_true",
+        help="also play the hand-made scripted controller on the same episodes (alone without a checkpoint)",
+    )
+    parser.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        help=f"the environment for the scripted controller alone (default {HARD_V1_ENV_ID}); a checkpoint is "
+        "evaluated on its own",
+    )
     parser.add_argument("--json", type=Path, metavar="PATH", help="also write the results, per episode included, here")
+
+
+def placement_line(result: EvaluationResult) -> str:
+    """Success by placement band, one line: 'by placement: inside the clamp 72% (38), ...'."""
+    bands = success_by_band(result.diagnosed())
+    return "by placement: " + ", ".join(f"{band.label} {band.cell()}" for band in bands)
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        checkpoint = read_checkpoint(args.checkpoint)
-        task = checkpoint_task(args.task, checkpoint)
+        return _evaluate(args)
     except UsageError as error:
         print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
         return 2
-    try:
-        result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
     except KeyboardInterrupt:
         print("kuka-curriculum evaluate: stopped; nothing was written", file=sys.stderr)
         return 130
-    print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
-    print(result.summary())
-    if args.json is not None:
-        write_json(
-            args.json,
-            {
-                "checkpoint": str(checkpoint.path),
-                "steps": checkpoint.counters.steps,
-                "teacher": checkpoint.config.teacher,
-                **result.to_dict(),
-            },
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    if args.checkpoint is None:
+        if not args.scripted:
+            raise UsageError("give a CHECKPOINT, or --scripted for the scripted controller alone")
+        env = args.env or HARD_V1_ENV_ID
+        try:
+            task = parse_task(args.task, task_space_for(env))
+        except ValueError as error:
+            raise UsageError(f"--task: {error}") from None
+        scripted = evaluate_policy(
+            None,
+            task,
+            args.episodes,
+            args.seed,
+            args.processes,
+            args.max_episode_steps or DEFAULT_MAX_STEPS,
+            env_id=env,
         )
+        print(f"scripted controller: {scripted.summary()}\n{placement_line(scripted)}")
+        if args.json is not None:
+            write_json(args.json, {"controller": "scripted", **scripted.to_dict()})
+        return 0
+
+    checkpoint = read_checkpoint(args.checkpoint)
+    if args.env is not None and args.env != checkpoint.config.env:
+        raise UsageError(f"--env {args.env}: the checkpoint was trained on {checkpoint.config.env}, where it is played")
+    task = checkpoint_task(args.task, checkpoint)
+    result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
+    print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
+    print(f"{result.summary()}\n{placement_line(result)}")
+    record = {
+        "checkpoint": str(checkpoint.path),
+        "steps": checkpoint.counters.steps,
+        "teacher": checkpoint.config.teacher,
+    }
+    if args.scripted:
+        steps = args.max_episode_steps or checkpoint.config.max_episode_steps
+        scripted = evaluate_policy(
+            None, task, args.episodes, args.seed, args.processes, steps, env_id=checkpoint.config.env
+        )
+        print(f"scripted controller, the same episodes: {scripted.summary()}\n{placement_line(scripted)}")
+        record["scripted"] = {"controller": "scripted", **scripted.to_dict()}
+    if args.json is not None:
+        write_json(args.json, {**record, **result.to_dict()})
     return 0

@@ -10,12 +10,13 @@ import pytest
 from ctrl_c import ctrl_c_as_the_pool_starts
 from tiny_checkpoint import save_untrained_checkpoint
 
-from common.kuka import HARD_ENV_ID
-from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
+from common.kuka.diagnostics import EpisodeDiagnostics
+from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
 from learner.arguments import UsageError
-from learner.bakeoff_report import BOOK_RETURNS, results_markdown
+from learner.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
 from learner.bakeoff_runs import Run, check_settings, learning_curve, plan_runs, teacher_params_by_kind, train_command
 from learner.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
 from learner.checkpoint import latest_checkpoint, load_checkpoint
@@ -95,10 +96,24 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert f"| {BOOK_RETURNS['fixed']:.2f} |" in table
     assert "registered with" not in table, "fixed and random take no KUKA parameters"
     assert iio.imread(out / "learning_curves.png").ndim == 3
+    # The scripted controller played the final evaluation's seeds, and each teacher's students sit beside it.
+    scripted = json.loads((out / "scripted_evaluation.json").read_text())
+    assert (scripted["controller"], scripted["seed"], scripted["episodes"]) == ("scripted", 0, 3)
+    placements = json.loads((fixed.directory / "evaluation.json").read_text())["per_episode"]["block_x"]
+    assert scripted["per_episode"]["block_x"] == placements
+    assert results["scripted"]["success_rate"] == scripted["success_rate"]
+    assert results["scripted"]["success_by_placement"] == scripted["success_by_placement"]
+    assert sum(band["episodes"] for band in results["teachers"][0]["success_by_placement"][:4]) == 3
+    assert "## Where the students fail: success by block placement" in table
+    for row in ("| No curriculum: hardest task only (1 seeds) |", "| Uniform random tasks (1 seeds) |"):
+        assert row in table
+    assert "| Scripted controller (no learning) |" in table and "left out" not in table
+    assert iio.imread(out / "success_by_placement.png").ndim == 3
 
     # Run again: every run is finished and evaluated, so nothing is trained or evaluated anew.
     untouched = {path: path.stat().st_mtime_ns for path in out.glob("runs/*/*") if path.is_file()}
     untouched |= {path: path.stat().st_mtime_ns for path in out.glob("runs/*/checkpoints/*")}
+    untouched[out / "scripted_evaluation.json"] = (out / "scripted_evaluation.json").stat().st_mtime_ns
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
     printed = capsys.readouterr().out
     assert printed.count(f"finished at {2 * BATCH:_} steps, skipped") == 2
@@ -188,6 +203,36 @@ def test_the_success_interval_over_seeds_stays_within_zero_and_one(tmp_path):
     interval = result.success_over_seeds
     assert interval.estimate == pytest.approx(0.95) and interval.high == 1.0 and 0.0 < interval.low < 0.95
     assert result.seed_success_rates == [0.9, 1.0]
+
+
+def test_the_placement_table_holds_each_diagnosed_teacher_and_the_scripted_controller(tmp_path):
+    task = KUKA_HARD_V1_TASK_SPACE.hardest()
+
+    def evaluation(placed: list[tuple[float, bool]], diagnosed: bool = True) -> EvaluationResult:
+        episodes = tuple(EpisodeStats(task, 1.0, success, 800) for _, success in placed)
+        diagnostics = tuple(EpisodeDiagnostics(x, 0.0, 0.0, 0.0, 0.0, 1.0) for x, _ in placed) if diagnosed else ()
+        return EvaluationResult(task, 100000, episodes, HARD_V1_ENV_ID, diagnostics)
+
+    def result(teacher: str, *evaluations: EvaluationResult) -> TeacherResult:
+        runs = tuple(Run(teacher, seed, tmp_path / f"{teacher}-{seed}") for seed in range(len(evaluations)))
+        return TeacherResult(teacher, runs, evaluations, HARD_V1_ENV_ID)
+
+    currot = result("currot", evaluation([(0.58, True), (0.68, False)]), evaluation([(0.66, True), (0.695, False)]))
+    # One seed evaluated before episodes recorded their placement: a table of the other seed alone would mislead.
+    alp_gmm = result("alp-gmm", evaluation([(0.58, True)]), evaluation([(0.58, True)], diagnosed=False))
+    scripted = evaluation([(0.58, True), (0.68, True), (0.66, True), (0.695, True)])
+    settings = {"total_steps": 1000, "curve_every": 25, "curve_episodes": 20, "teacher_params": {}}
+    report = results_markdown([currot, alp_gmm], settings, episodes=2, seed=100000, scripted=scripted)
+    section = report[report.index("## Where the students fail") :]
+    assert "| CURROT (2 seeds) | 50% (4) | 100% (1) | 100% (1) | 0% (1) | 0% (1) | 0% (1) | 2 of 2 (100%) |" in section
+    assert "| Scripted controller (no learning) | 100% (4) |" in section and "ALP-GMM (" not in section
+    assert "so left out: ALP-GMM." in section
+    assert teacher_record(alp_gmm)["success_by_placement"] is None
+    record = teacher_record(currot)
+    assert record["failures_beyond_clamp"] == {"beyond": 2, "failures": 2}
+    assert [band["episodes"] for band in record["success_by_placement"]] == [1, 1, 1, 1, 1]
+    # Without any diagnosed episodes the section is left out whole.
+    assert "Where the students fail" not in results_markdown([alp_gmm], settings, episodes=2, seed=100000)
 
 
 def test_the_report_names_what_each_teacher_was_registered_with(tmp_path):

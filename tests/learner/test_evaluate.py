@@ -10,14 +10,17 @@ import pytest
 from ctrl_c import ctrl_c_as_the_pool_starts
 from tiny_checkpoint import TINY_EPISODE_STEPS, save_untrained_checkpoint
 
-from common.kuka import HARD_ENV_ID
-from common.kuka.env import KukaGraspEnv, KukaGraspHardEnv
-from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
+from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
+from common.kuka.diagnostics import play_episode
+from common.kuka.env import KukaGraspEnv, KukaGraspHardEnv, make_kuka_env
+from common.kuka.scripted import scripted_action
+from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.actor_critic import InferencePolicy
 from kuka_curriculum import main
 from learner.checkpoint import load_checkpoint
 from learner.checkpoint_arguments import parse_task
-from learner.checkpoint_evaluation import describe_task, evaluate_policy
+from learner.checkpoint_evaluation import EvaluationResult, describe_task, evaluate_policy
+from learner.episode_diagnostics import success_by_band
 from learner.kuka_policy import policy_snapshot
 from learner.stats import mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
@@ -64,7 +67,7 @@ def test_results_do_not_depend_on_how_many_processes_share_the_episodes(checkpoi
     task = parse_task("rnd_obj_ang=0.3")
     alone = evaluate_policy(snapshot, task, episodes=4, seed=3, processes=1, max_episode_steps=30, progress=False)
     shared = evaluate_policy(snapshot, task, episodes=4, seed=3, processes=2, max_episode_steps=30, progress=False)
-    assert shared.episodes == alone.episodes
+    assert shared.episodes == alone.episodes and shared.diagnostics == alone.diagnostics
     assert len({episode.reward for episode in alone.episodes}) > 1, "different seeds should place the block differently"
 
 
@@ -114,6 +117,57 @@ def test_a_checkpoint_plays_the_environment_it_was_trained_on(checkpoint, tmp_pa
     # The book's environment has no such parameter.
     assert main(["evaluate", str(checkpoint), "--task", "obj_far=0.5"]) == 2
     assert "unknown task parameter(s) ['obj_far']" in capsys.readouterr().err
+
+
+DIAGNOSTICS = ("block_x", "block_y", "block_yaw", "beyond_clamp", "touchdown_offset", "off_square_degrees")
+
+
+def test_each_episode_records_where_its_block_lay_and_the_scripted_controller_plays_the_same_ones(tmp_path, capsys):
+    hard = save_untrained_checkpoint(tmp_path / "v1-run", env=HARD_V1_ENV_ID)
+    out = tmp_path / "both.json"
+    flags = ["--episodes", "3", "--seed", "100000", "--processes", "1", "--json", str(out)]
+    assert main(["evaluate", str(hard), "--scripted", *flags]) == 0
+    written = json.loads(out.read_text())
+    per_episode, scripted = written["per_episode"], written["scripted"]
+    assert all(len(per_episode[name]) == 3 for name in DIAGNOSTICS)
+    # The same seeds put the block in the same places for the policy and the scripted controller.
+    env = make_kuka_env(HARD_V1_ENV_ID)
+    placements = []
+    for seed in range(100000, 100003):
+        env.reset(seed=seed, options={"task": KUKA_HARD_V1_TASK_SPACE.hardest()})
+        placements.append(env.block_pose())
+    assert [tuple(per_episode[name][i] for name in DIAGNOSTICS[:3]) for i in range(3)] == placements
+    assert scripted["controller"] == "scripted" and scripted["seed"] == 100000
+    assert [scripted["per_episode"][name] for name in DIAGNOSTICS[:4]] == [
+        per_episode[name] for name in DIAGNOSTICS[:4]
+    ]
+    # The bands in the file are those of its own episodes, and the result reads back whole.
+    result = EvaluationResult.from_dict(written)
+    assert len(result.diagnostics) == 3
+    assert written["success_by_placement"] == [band.to_dict() for band in success_by_band(result.diagnosed())]
+    assert EvaluationResult.from_dict(result.to_dict()) == result
+    printed = capsys.readouterr().out
+    assert "by placement: inside the clamp" in printed and "scripted controller, the same episodes:" in printed
+
+    # Alone, on its default family, with that family's own step limit: the episodes play_episode plays.
+    alone = tmp_path / "scripted.json"
+    assert main(["evaluate", "--scripted", "--episodes", "2", "--seed", "100000", "--json", str(alone)]) == 0
+    played = json.loads(alone.read_text())
+    expected = [
+        play_episode(env, KUKA_HARD_V1_TASK_SPACE.hardest(), scripted_action, seed) for seed in (100000, 100001)
+    ]
+    env.close()
+    assert played["controller"] == "scripted" and played["env"] == HARD_V1_ENV_ID
+    assert played["per_episode"]["success"] == [episode.success for episode in expected]
+    assert played["per_episode"]["off_square_degrees"] == [e.diagnostics.off_square_degrees for e in expected]
+    assert played["per_episode"]["block_x"] == per_episode["block_x"][:2]
+    assert "scripted controller: KukaGraspHard-v1, hardest task, 2 episodes" in capsys.readouterr().out
+
+    # Without a checkpoint there is nothing to evaluate but the scripted controller; a checkpoint plays its own env.
+    assert main(["evaluate"]) == 2
+    assert "give a CHECKPOINT, or --scripted" in capsys.readouterr().err
+    assert main(["evaluate", str(hard), "--env", HARD_ENV_ID]) == 2
+    assert f"the checkpoint was trained on {HARD_V1_ENV_ID}" in capsys.readouterr().err
 
 
 def test_task_strings():
