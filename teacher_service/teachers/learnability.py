@@ -64,7 +64,7 @@ POOL_STREAM = 3
 MAX_POOL = 1000
 MAX_BUFFER = 5000
 MAX_NEIGHBOURS = 64
-"""Together these bound one refresh: a k-d tree over at most 10,000 results and at most 2,000
+"""Together these bound one refresh: a k-d tree over at most 5,000 results and at most 1,000
 queries of 64 neighbours each."""
 
 UNKNOWN_SUCCESS = -1.0
@@ -91,14 +91,19 @@ class LearnabilityParams(TeacherParams):
     """Share of tasks drawn uniformly over the box instead of from the pool."""
     top_k: int | None = Field(default=20, ge=1, le=MAX_POOL)
     """Replay only the ``top_k`` highest-scoring candidates (SFL keeps its top K levels); null
-    means the whole pool. On the toy, 20 of 200 masters about half again what the whole pool does."""
+    means the whole pool. On the ALP-GMM paper's toy (2 seeds, in process), the top 20 of 200
+    mastered 75% (2-D) and 70% (6-D) of the cubes at 20k episodes, the whole pool 58% and 48%."""
     return_bar: FiniteFloat | None = Field(default=None, ge=-1e9, le=1e9)
     """The return above which a result without ``success`` counts as one; null means the midpoint
     of the lowest and highest return among the held results without ``success``."""
 
 
 class LearnabilityTeacher(Teacher):
-    """Samples a pool of candidate tasks by estimated learnability p(1 - p) (see the module docstring)."""
+    """Replays the tasks the student solves about half the time: a pool of candidates (uniform and
+    replayed) picked by estimated learnability p(1 - p), plus a share of fresh uniform tasks. Success
+    comes from results' ``success``, else from a return bar: given, or the midpoint of the returns seen.
+
+    See the module docstring for the estimate, the bounds and where it departs from SFL."""
 
     kind = "learnability"
     Params = LearnabilityParams
