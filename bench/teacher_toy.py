@@ -25,6 +25,20 @@ reference's default parameters. They import from a throw-away package tree in a 
 ``gym.spaces.Box`` shim over gymnasium's whose ``sample`` draws from numpy's global generator like
 old gym's seeded one did, so a run is repeatable. RIAC needs ``treelib`` (in the ``dev`` extra).
 
+With ``DIR/currot`` present (psclklnk/currot's main branch, see its README), ``--reference`` also runs
+the authors' CURROT, through their TeachMyAgent adapter (``TMAContinuousBarycenterCurriculum``:
+uniform starting particles and target), and their SPDL (``SelfPacedTeacherV2``, fed the returns of
+every ``update_every`` episodes). Their settings are ours translated (``reference_settings``): from
+``currot``'s effective parameters (defaults plus ``--teacher-param``) the particles, the update
+interval, the move radius (``max_move`` of the unit box's diagonal; the authors take the square root
+of their ``epsilon``, so it gets the radius squared) and the return bar (ours' ``delta``, else 0.5,
+the middle of the toy's rewards, which is the adapter's own default for rewards in [0, 1]); from
+``self-paced``'s the start, the spreads, the target (``uniform``: N(0.5, I/12)), the bar (``zeta``,
+on the toy's [0, 1] returns), the KL limit and the update interval. Each such run records those
+settings as its parameters, and ours is compared with the reference run of matching settings. The
+adapter only starts and aims uniform, so ``currot`` with another ``start`` or ``target`` has no
+reference run. ``np.random.seed(seed)`` and ``torch.manual_seed(seed)`` make them repeatable.
+
 A full run takes hours, so the driver resumes: each finished run (ours or the reference's, refused
 ones too) is appended at once to ``--out`` as one JSON line and fsync'd, so a kill loses at most the
 run in progress. On start the driver reads that file and skips every run already in it; a run is
@@ -50,6 +64,7 @@ import fcntl
 import importlib
 import itertools
 import json
+import math
 import multiprocessing
 import os
 import queue
@@ -61,7 +76,7 @@ import tempfile
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -70,6 +85,7 @@ from typing import Any, Protocol
 
 import httpx
 import numpy as np
+import scipy.stats
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
@@ -77,6 +93,8 @@ from tqdm import tqdm
 from common.client.schemas import API_PREFIX
 from teacher_service.process import ServiceProcess
 from teacher_service.teachers import TEACHER_KINDS
+from teacher_service.teachers.currot import CurrotParams
+from teacher_service.teachers.self_paced import SelfPacedParams
 
 CUBES = 10
 MAX_COMPETENCE = 100
@@ -90,6 +108,16 @@ FIT_POLL_S = 0.02
 
 REFERENCE_CLASSES = {"alp-gmm": ("alp_gmm", "ALPGMM"), "covar-gmm": ("covar_gmm", "CovarGMM"), "riac": ("riac", "RIAC")}
 """Our kind to the reference module and class that implement the same teacher."""
+
+AUTHORS_DIR = "currot"
+"""The authors' CURROT and SPDL, inside the ``--reference`` directory."""
+AUTHORS_CLASSES = {
+    "currot": ("deep_sprl.teachers.spl.currot_tma", "TMAContinuousBarycenterCurriculum"),
+    "self-paced": ("deep_sprl.teachers.spl.self_paced_teacher_v2", "SelfPacedTeacherV2"),
+}
+"""Our kind to the authors' module and class (psclklnk/currot, main branch)."""
+TOY_REWARD_RANGE = (0.0, 1.0)
+"""The toy's rewards, as the authors' adapter is told them."""
 
 GYM_SHIM = '''"""gym.spaces.Box for the teachDeepRL code: gymnasium's, with bounds copied and samples drawn from
 numpy's global generator (seeded by the benchmark), as a seeded old-gym Box drew from its own."""
@@ -322,22 +350,77 @@ def reference_modules(directory: Path) -> Iterator[dict[str, Any]]:
             shutil.copy(directory / f"{module}.py", algos / f"{module}.py")
         shutil.copy(directory / "dataset.py", utils / "dataset.py")
         (gym / "spaces.py").write_text(GYM_SHIM)
+        authors = directory / AUTHORS_DIR
+        if authors.is_dir():
+            for package in ("deep_sprl", "TeachMyAgent"):
+                shutil.copytree(authors / package, root / package)
         sys.path.insert(0, temp)
         try:
-            yield {
+            classes = {
                 kind: getattr(importlib.import_module(f"teachDRL.teachers.algos.{module}"), name)
                 for kind, (module, name) in REFERENCE_CLASSES.items()
             }
+            if authors.is_dir():
+                classes.update(
+                    {
+                        kind: getattr(importlib.import_module(module), name)
+                        for kind, (module, name) in AUTHORS_CLASSES.items()
+                    }
+                )
+            yield classes
         finally:
             sys.path.remove(temp)
 
 
+def reference_settings(kind: str, dims: int, params: dict[str, Any]) -> dict[str, Any] | None:
+    """The settings of the reference run that ``kind`` with ``params`` (ours) is compared with, as
+    recorded in that run's parameters; ``None`` when no reference can run them (see the module
+    docstring). teachDeepRL's run with their defaults: ``{}``."""
+    if kind in REFERENCE_CLASSES:
+        return {}
+    if kind not in AUTHORS_CLASSES or kind not in TEACHER_KINDS:
+        return None
+    if kind == "currot":
+        ours = CurrotParams.parse(params)
+        if ours.start != "uniform" or ours.target != "uniform":
+            return None
+        delta = ours.delta
+        return {
+            "particles": ours.particles,
+            "update_every": ours.update_every,
+            "max_move": ours.max_move,
+            "delta": float(statistics.fmean(TOY_REWARD_RANGE) if delta is None else delta),
+        }
+    spdl = SelfPacedParams.parse(params)
+    start = spdl.start
+    return {
+        "start": [0.0] * dims if start is None else [float(start[f"x{i}"]) for i in range(dims)],
+        "initial_spread": spdl.initial_spread,
+        "target": spdl.target,
+        "target_spread": spdl.target_spread,
+        "bar": spdl.zeta,
+        "kl_limit": spdl.kl_limit,
+        "update_every": spdl.update_every,
+    }
+
+
 def run_reference(
-    teacher_class: Any, dims: int, seed: int, episodes: int, checkpoints: list[int], bar: Progress
+    kind: str,
+    teacher_class: Any,
+    dims: int,
+    seed: int,
+    settings: dict[str, Any],
+    checkpoints: list[int],
+    bar: Progress,
 ) -> dict[int, float]:
+    """One reference run on the toy: teachDeepRL's with their defaults, the authors' with ``settings``."""
     np.random.seed(seed)
-    teacher = teacher_class([0.0] * dims, [1.0] * dims, seed=seed)
     toy = Toy()
+    if kind == "currot":
+        return play_authors_currot(teacher_class, toy, dims, seed, settings, checkpoints, bar)
+    if kind == "self-paced":
+        return play_authors_spdl(teacher_class, toy, dims, seed, settings, checkpoints, bar)
+    teacher = teacher_class([0.0] * dims, [1.0] * dims, seed=seed)
 
     def step(at_most: int) -> int:
         task = np.asarray(teacher.sample_task())
@@ -345,7 +428,74 @@ def run_reference(
         bar.update(1)
         return 1
 
-    return play(toy, episodes, checkpoints, step)
+    return play(toy, checkpoints[-1], checkpoints, step)
+
+
+def play_authors_currot(
+    adapter: Any, toy: Toy, dims: int, seed: int, settings: dict[str, Any], checkpoints: list[int], bar: Progress
+) -> dict[int, float]:
+    """The authors' CURROT through their TeachMyAgent adapter; it prints every update, so stdout is muted."""
+    radius = settings["max_move"] * math.sqrt(dims)
+    teacher = adapter(
+        [0.0] * dims,
+        [1.0] * dims,
+        *TOY_REWARD_RANGE,
+        perf_lb=settings["delta"],
+        n_samples=settings["particles"],
+        episodes_per_update=settings["update_every"],
+        epsilon=radius**2,
+        seed=seed,
+    )
+
+    def step(at_most: int) -> int:
+        task = np.asarray(teacher.sample_task(), dtype=np.float64)
+        teacher.episodic_update(task, toy.episode(task), None)
+        bar.update(1)
+        return 1
+
+    with open(os.devnull, "w") as muted, redirect_stdout(muted):
+        return play(toy, checkpoints[-1], checkpoints, step)
+
+
+def play_authors_spdl(
+    spdl: Any, toy: Toy, dims: int, seed: int, settings: dict[str, Any], checkpoints: list[int], bar: Progress
+) -> dict[int, float]:
+    """The authors' SPDL, updated with the tasks and returns of every ``update_every`` episodes (their
+    ``SelfPacedWrapper``'s loop, with returns for values as the toy has no critic); muted as above."""
+    import torch  # only here: the authors' SPDL is the one part of the benchmark that needs it
+
+    torch.manual_seed(seed)
+    torch.set_num_threads(1)  # one thread, as for every fit here; its update is still seconds to a minute
+    if settings["target"] == "uniform":
+        target_mean, target_cov = np.full(dims, 0.5), np.eye(dims) / 12.0
+    else:
+        target_mean, target_cov = np.ones(dims), settings["target_spread"] ** 2 * np.eye(dims)
+    target = scipy.stats.multivariate_normal(target_mean, target_cov)
+    teacher = spdl(
+        lambda points: np.atleast_1d(target.logpdf(points)),
+        lambda count: np.random.multivariate_normal(target_mean, target_cov, size=count),
+        np.array(settings["start"], dtype=np.float64),
+        settings["initial_spread"] ** 2,
+        (np.zeros(dims), np.ones(dims)),
+        settings["bar"],
+        max_kl=settings["kl_limit"],
+    )
+    tasks: list[np.ndarray] = []
+    returns: list[float] = []
+
+    def step(at_most: int) -> int:
+        task = np.asarray(teacher.sample(), dtype=np.float64)
+        tasks.append(task)
+        returns.append(toy.episode(task))
+        if len(tasks) == settings["update_every"]:
+            teacher.update_distribution(np.array(tasks), np.array(returns))
+            tasks.clear()
+            returns.clear()
+        bar.update(1)
+        return 1
+
+    with open(os.devnull, "w") as muted, redirect_stdout(muted):
+        return play(toy, checkpoints[-1], checkpoints, step)
 
 
 def describe(run: Run) -> str:
@@ -395,9 +545,10 @@ def summarise(runs: list[Run], checkpoints: list[int]) -> str:
         per_seed = " ".join(f"{seed}:{mastered[last]:.0f}" for seed, mastered in sorted(members))
         lines.append(f"{key[0]}-D    {labels[key]:<{width}} " + " ".join(f"{m:7.1f}" for m in means) + f"  {per_seed}")
     for key, final in sorted(finals.items()):
-        dims, teacher, implementation, _, _ = key
-        reference = finals.get((dims, teacher, "reference", canonical({}), 1))
-        if implementation == "ours" and reference is not None:
+        dims, teacher, implementation, params, _ = key
+        settings = reference_settings(teacher, dims, json.loads(params)) if implementation == "ours" else None
+        reference = None if settings is None else finals.get((dims, teacher, "reference", canonical(settings), 1))
+        if reference is not None:
             ratio = f"{final / reference:.2f}x" if reference > 0 else "n/a (reference 0)"
             lines.append(f"{dims}-D    {labels[key]}: ours / reference at {last:,} episodes = {ratio}")
     lines += [f"refused {what}: {why}" for what, why in sorted(refused.items())]
@@ -484,7 +635,12 @@ def execute(
         with reference_modules(reference) as classes:
             for run_id in theirs:
                 start = time.perf_counter()
-                mastered = run_reference(classes[run_id.teacher], run_id.dims, run_id.seed, episodes, checkpoints, bar)
+                if run_id.teacher not in classes:
+                    raise SystemExit(f"{reference / AUTHORS_DIR} is missing: the authors' {run_id.teacher} cannot run")
+                settings = json.loads(run_id.params)
+                mastered = run_reference(
+                    run_id.teacher, classes[run_id.teacher], run_id.dims, run_id.seed, settings, checkpoints, bar
+                )
                 finish(Run(run_id, mastered, None, time.perf_counter() - start, now_utc()))
 
 
@@ -588,7 +744,11 @@ def main() -> None:
         metavar="KIND.NAME=VALUE",
         help="a parameter of one kind, VALUE as JSON or else a string (repeatable)",
     )
-    parser.add_argument("--reference", type=Path, help="teachDeepRL teachers to run beside ours")
+    parser.add_argument(
+        "--reference",
+        type=Path,
+        help="teachDeepRL's teachers (and, in DIR/currot, the authors' CURROT and SPDL) to run beside ours",
+    )
     parser.add_argument(
         "--out", type=Path, default=Path("teacher_toy.jsonl"), help="results file: one JSON line per run, resumed"
     )
@@ -606,7 +766,11 @@ def main() -> None:
     params = teacher_params(args.teacher_param, parser)
     checkpoints = sorted({c for c in CHECKPOINTS if c < args.episodes} | {args.episodes})
     seeds = range(1, args.seeds + 1)
-    references = [k for k in kinds if k in REFERENCE_CLASSES] if args.reference else []
+    references = {
+        (dims, kind): settings
+        for dims, kind in itertools.product(spaces, kinds)
+        if args.reference and (settings := reference_settings(kind, dims, params.get(kind, {}))) is not None
+    }
 
     with sole_writer(args.out):
         runs = load_runs(args.out)
@@ -617,8 +781,9 @@ def main() -> None:
             RunId(dims, kind, "ours", seed, canonical(params.get(kind, {})), args.batch, args.episodes)
             for dims, kind, seed in itertools.product(spaces, kinds, seeds)
         ] + [
-            RunId(dims, kind, "reference", seed, canonical({}), 1, args.episodes)
-            for dims, kind, seed in itertools.product(spaces, references, seeds)
+            RunId(dims, kind, "reference", seed, canonical(settings), 1, args.episodes)
+            for (dims, kind), settings in references.items()
+            for seed in seeds
         ]
         finished = {run.id for run in runs}
         todo = [run_id for run_id in planned if run_id not in finished]
