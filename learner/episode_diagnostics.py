@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.stats import Interval, wilson_interval
+from learner.stats import CONFIDENCE, Interval, wilson_interval
 
 BAND_EDGES = (0.0, 0.02, 0.04)
 """Distances (metres) beyond the clamp that split the bands; the last band is open above."""
@@ -114,7 +114,7 @@ def plot_bands(path: Path, rows: Sequence[tuple[str, Sequence[tuple[EpisodeDiagn
         axes.bar_label(bars, labels=[str(band.episodes) for band in bands], fontsize="x-small", padding=2)
     axes.set_xticks(range(len(ALL_LABELS)), ALL_LABELS)
     axes.set_ylim(0, 1.1)
-    axes.set_ylabel("success (Wilson 95% interval; episodes above)")
+    axes.set_ylabel(f"success (Wilson {CONFIDENCE:.0%} interval; episodes above)")
     axes.set_title("Final evaluation: success by how far the block lay beyond the arm's x reach")
     axes.grid(axis="y", alpha=0.3)
     axes.legend(loc="center left", bbox_to_anchor=(1.01, 0.5))
