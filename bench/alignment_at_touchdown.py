@@ -28,11 +28,12 @@ import numpy as np
 import torch
 
 # A sibling script (bench/ is the script's path, not a package).
-from task_hardness import CHUNK, POLICIES, Policy, episode_policy, run_episode
+from task_hardness import CHUNK, POLICIES, Policy, episode_policy
 
 from common.client.task_space import Task
 from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.env import BLOCK_XY_IN_GRIPPER, make_kuka_env
+from common.kuka.diagnostics import play_episode
+from common.kuka.env import make_kuka_env
 from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
 from common.policy.actor_critic import InferencePolicy
 from learner.checkpoint_arguments import read_checkpoint
@@ -47,9 +48,9 @@ MISS_CM = (1.0, 2.0, 4.0)
 """Distances (cm) from where lifts hold the block: how many touchdowns without a lift lay farther."""
 
 Touchdown = tuple[bool, float, float, float]
-"""One episode: whether the block was lifted, the fingers' angle from square at touchdown (NaN if the
-episode ended without touching the tray), and the block's x and y (metres) in the gripper's frame a step
-before the episode ended."""
+"""One episode: whether the block was lifted, the fingers' angle from square at touchdown, and the block's x
+and y (metres) in the gripper's frame a step before touchdown (each NaN if the episode ended without
+touching the tray), as ``common.kuka.diagnostics`` records them."""
 
 
 def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[Touchdown]:
@@ -66,9 +67,11 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[T
     try:
         for seed in seeds:
             act: Policy = deterministic if network else episode_policy(policy, np.random.default_rng(seed))
-            info, _, _, last_seen = run_episode(env, task, act, seed)
-            block_x, block_y = (float(value) for value in last_seen[BLOCK_XY_IN_GRIPPER])
-            episodes.append((bool(info["is_success"]), float(info.get("off_square_degrees", np.nan)), block_x, block_y))
+            played = play_episode(env, task, act, seed)
+            touchdown = played.diagnostics
+            measured = (touchdown.off_square_degrees, touchdown.touchdown_block_x, touchdown.touchdown_block_y)
+            angle, block_x, block_y = (np.nan if value is None else value for value in measured)
+            episodes.append((played.success, angle, block_x, block_y))
     finally:
         env.close()
     return episodes
