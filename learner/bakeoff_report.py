@@ -42,6 +42,7 @@ TEACHER_LABELS = {
     "currot": "CURROT",
     "covar-gmm": "Covar-GMM",
     "riac": "RIAC",
+    "learnability": "Learnability (SFL)",
 }
 BOOK_RETURNS = {"alp-gmm": 3.71, "fixed": 2.81, "manual": -2.79}
 """The book's chapter 14: mean scaled return over 100 episodes on the hardest task, one seed, ~1.7M steps."""

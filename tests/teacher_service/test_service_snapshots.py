@@ -38,6 +38,7 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "adr": {"queue_length": 3, "reward_range": [0.0, 2.0]},
     "self-paced": {"update_every": 12, "reward_range": [0.0, 2.0]},
     "currot": {"particles": 40, "update_every": 12, "buffer_size": 40, "candidates": 8, "delta": 1.0},
+    "learnability": {"pool_size": 30, "update_every": 12, "buffer_size": 40, "top_k": 8},
 }
 SPACE = [ParameterSpec.from_parameter(p).model_dump() for p in KUKA_TASK_SPACE.parameters]
 
