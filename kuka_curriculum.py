@@ -61,6 +61,12 @@ def _bakeoff() -> CommandModule:
     return bakeoff
 
 
+def _tune() -> CommandModule:
+    from learner import tune
+
+    return tune
+
+
 COMMANDS: dict[str, Command] = {
     "demo": Command("Write a short GIF of the KUKA grasp environment under random actions.", _demo),
     "train": Command("Train the PPO policy with distributed rollouts and a curriculum teacher.", _train),
@@ -70,6 +76,7 @@ COMMANDS: dict[str, Command] = {
     "bakeoff": Command(
         "Train and evaluate every teacher over several seeds; write a results table and curves.", _bakeoff
     ),
+    "tune": Command("Search hyperparameters with Ray Tune, every trial a curriculum on one teacher service.", _tune),
 }
 
 

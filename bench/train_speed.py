@@ -17,6 +17,12 @@ so the raw loop does the same work per step as training did. The pipeline's own 
 ratio to the second.
 
     .venv/bin/python bench/train_speed.py --workers 2 --total-steps 300000 --loops async sync
+
+With ``--baseline COMMIT`` it answers another question: how much faster the working tree trains than that
+commit. It exports the commit's whole tree (``git archive``) and runs its ``train``, then the working tree's,
+on the same family, teacher, budget and seed, and prints both rates and their ratio (no ceilings):
+
+    .venv/bin/python bench/train_speed.py --baseline e0bfb64 --env KukaGraspHard-v1 --teacher fixed --loops async
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
 import subprocess
 import sys
 import tempfile
@@ -34,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from common.client.task_space import Task
+from common.kuka import ENV_IDS
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.config import LOOPS, TrainConfig
@@ -101,19 +109,33 @@ class TrainRun:
     updating: float
     evaluating: float
     mean_episode_length: float
-    same_tasks_ceiling: RawRate
+    same_tasks_ceiling: RawRate | None
 
     @property
     def other(self) -> float:
         return self.loop_seconds - self.waiting - self.updating - self.evaluating
 
 
-def timed_train(loop: str, workers: int, total_steps: int, seed: int, scratch: Path, raw_seconds: float) -> TrainRun:
-    run_dir = scratch / f"train-{loop}"
+def timed_train(
+    loop: str,
+    workers: int,
+    total_steps: int,
+    seed: int,
+    run_dir: Path,
+    raw_seconds: float | None,
+    family: list[str],
+    root: Path = ROOT,
+) -> TrainRun:
+    """``train`` of the code under ``root`` (its packages first on the path), timed; with ``raw_seconds``, also
+    the ceiling of the tasks it played. ``family`` holds the ``--env`` and ``--teacher`` flags."""
     command = [sys.executable, "-m", "kuka_curriculum", "train", "--loop", loop, "--workers", str(workers),
-               "--total-steps", str(total_steps), "--seed", str(seed), "--run-dir", str(run_dir)]  # fmt: skip
+               "--total-steps", str(total_steps), "--seed", str(seed), "--run-dir", str(run_dir), *family]  # fmt: skip
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))}
+    # Both sides' local Ray clusters alike, whichever default each commit's train leaves to Ray: Ray 2.5x turns
+    # token authentication on when this is unset, and a stray token file then fails the cluster's start.
+    environment.setdefault("RAY_AUTH_MODE", "disabled")
     started = time.perf_counter()
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
+    done = subprocess.run(command, cwd=root, env=environment, capture_output=True, text=True, check=False)
     command_seconds = time.perf_counter() - started
     if done.returncode != 0:
         raise SystemExit(f"train --loop {loop} failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
@@ -130,8 +152,38 @@ def timed_train(loop: str, workers: int, total_steps: int, seed: int, scratch: P
         evaluating=sum(r.get("perf/eval_wait_seconds") or 0.0 for r in records),
         mean_episode_length=sum(r["train/episode_length"] * r["train/episodes"] for r in records if r["train/episodes"])
         / episodes,
-        same_tasks_ceiling=raw_ceiling(workers, raw_seconds, seed, played_tasks(run_dir, seed)),
+        same_tasks_ceiling=None
+        if raw_seconds is None
+        else raw_ceiling(workers, raw_seconds, seed, played_tasks(run_dir, seed)),
     )
+
+
+def compare_with_baseline(args: argparse.Namespace, family: list[str], scratch: Path) -> None:
+    """``train`` of the baseline commit, then of the working tree, per loop; both rates and their ratio."""
+    baseline = scratch / "baseline"
+    baseline.mkdir()
+    archive = subprocess.run(["git", "archive", args.baseline], cwd=ROOT, capture_output=True, check=True)
+    subprocess.run(["tar", "-x", "-C", str(baseline)], input=archive.stdout, check=True)
+    print(f"train {' '.join(family)} --workers {args.workers} --total-steps {args.total_steps:_} --seed {args.seed}")
+    for loop in args.loops:
+        load = os.getloadavg()[0]
+        runs = {
+            name: timed_train(
+                loop, args.workers, args.total_steps, args.seed, scratch / f"{name}-{loop}", None, family, root
+            )
+            for name, root in ((args.baseline, baseline), ("working tree", ROOT))
+        }
+        print(f"--loop {loop} (load average {load:.2f} before the runs, {os.getloadavg()[0]:.2f} after)")
+        rates = {}
+        for name, run in runs.items():
+            rates[name] = (run.steps / run.command_seconds, run.steps / run.loop_seconds)
+            whole, loop_rate = rates[name]
+            print(
+                f"  {name:14} whole command {whole:7,.0f} steps/s ({run.command_seconds:.1f} s), "
+                f"training loop {loop_rate:7,.0f} steps/s; episodes of {run.mean_episode_length:.0f} steps"
+            )
+        before, after = rates.values()
+        print(f"  ratio          whole command {after[0] / before[0]:.2f}, training loop {after[1] / before[1]:.2f}")
 
 
 def main() -> None:
@@ -146,13 +198,29 @@ def main() -> None:
         help="each raw measurement (the hardest-task one split before and after)",
     )
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--env", choices=ENV_IDS, default=ENV_IDS[0], help="train's task family")
+    parser.add_argument("--teacher", default="alp-gmm", help="train's teacher (fixed: the family's hardest task)")
+    parser.add_argument("--baseline", metavar="COMMIT", help="time this commit's train against the working tree's")
     args = parser.parse_args()
+    family = ["--env", args.env, "--teacher", args.teacher]
+    if args.baseline is not None:
+        with tempfile.TemporaryDirectory() as scratch:
+            compare_with_baseline(args, family, Path(scratch))
+        return
 
     hardest = [KUKA_TASK_SPACE.hardest()]
     with tempfile.TemporaryDirectory() as scratch:
         before = raw_ceiling(args.workers, args.raw_seconds / 2, 0, hardest)
         runs = [
-            timed_train(loop, args.workers, args.total_steps, args.seed, Path(scratch), args.raw_seconds)
+            timed_train(
+                loop,
+                args.workers,
+                args.total_steps,
+                args.seed,
+                Path(scratch) / f"train-{loop}",
+                args.raw_seconds,
+                family,
+            )
             for loop in args.loops
         ]
         after = raw_ceiling(args.workers, args.raw_seconds / 2, args.workers, hardest)
@@ -162,6 +230,7 @@ def main() -> None:
           f"(before {before.steps_per_second:,.0f}, after {after.steps_per_second:,.0f}; "
           f"episodes of {before.mean_episode_length:.0f} steps)")  # fmt: skip
     for run in runs:
+        assert run.same_tasks_ceiling is not None
         same = run.same_tasks_ceiling.steps_per_second
         print(f"\ntrain --loop {run.loop}: {run.steps:,} steps, episodes of {run.mean_episode_length:.0f} steps")
         print(f"  same-tasks ceiling {same:7,.0f} steps/s (its tasks replayed with random actions: "

@@ -38,6 +38,7 @@ from learner.bakeoff_runs import (
 from learner.bakeoff_statistics import TeacherResult
 from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
 from learner.config import LOOPS, TEACHERS, TrainConfig
+from learner.config_file import BakeoffConfigAction
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -120,6 +121,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     training.add_argument(
         "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
+    )
+    training.add_argument(
+        "--config",
+        type=Path,
+        action=BakeoffConfigAction,
+        help="a settings file, such as the best.json of `kuka-curriculum tune`, for every run: its PPO values, "
+        "its layout and its teacher's parameters (for that teacher); flags given override it",
     )
     add_override_flags(
         training,

@@ -25,6 +25,7 @@ from common.client.write_token import TOKEN_VARIABLE, token_problem
 from common.kuka import ENV_IDS
 from learner.arguments import add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
+from learner.config_file import read_config_file
 
 DEFAULTS = TrainConfig()
 RAY_CONNECT_TIMEOUT_S = 5.0
@@ -44,6 +45,11 @@ class UsageError(Exception):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     run = parser.add_argument_group("run")
+    run.add_argument(
+        "--config",
+        type=Path,
+        help="a settings file, such as the best.json of `kuka-curriculum tune`; flags given override it",
+    )
     run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
     run.add_argument(
         "--env",
@@ -129,7 +135,9 @@ _RUN_SETTINGS = (
 
 
 def _config_from(args: argparse.Namespace, base: TrainConfig) -> TrainConfig:
-    """``base`` (the defaults, or a resumed run's saved config) with every flag given on top."""
+    """``base`` (the defaults, or a resumed run's saved config), then ``--config``'s file, then every flag given."""
+    if args.config is not None:
+        base = read_config_file(args.config).applied_to(base, teacher=args.teacher)
     overrides: dict[str, Any] = {name: getattr(args, name) for name in _RUN_SETTINGS if getattr(args, name) is not None}
     ppo_values = dict(args.ppo)
     if args.rollout_length is not None:

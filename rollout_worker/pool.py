@@ -16,6 +16,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 import ray
 from ray.exceptions import RayActorError
+from ray.util import get_current_placement_group
 
 from common.client.task_space import Task
 from common.policy.actor_critic import PolicySnapshot
@@ -109,7 +110,10 @@ class WorkerPool:
         incarnation = self._incarnations[slot]
         worker_seed = int(np.random.SeedSequence([self.seed, slot, incarnation]).generate_state(1)[0])
         # Spread over the nodes: each actor is CPU-bound, and a worker machine lost takes fewer of them with it.
-        options: dict[str, Any] = {"scheduling_strategy": "SPREAD"}
+        # Inside a placement group that captures its children (a `tune` trial's), take its bundles instead:
+        # an explicit strategy would place the actors outside the CPUs the trial claimed.
+        in_group = get_current_placement_group() is not None
+        options: dict[str, Any] = {} if in_group else {"scheduling_strategy": "SPREAD"}
         if self.name_prefix is not None:
             options["name"] = f"{self.name_prefix}-worker-{slot}-{incarnation}"
         return RolloutWorker.options(**options).remote(self.settings, worker_seed)  # type: ignore[attr-defined]  # ray types @ray.remote(...) as keeping the plain class

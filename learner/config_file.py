@@ -1,0 +1,116 @@
+"""A settings file for ``train --config`` and ``bakeoff --config``, such as the ``best.json`` that
+``tune`` writes: the chosen settings travel from a search to the runs that use them, and flags
+given on the command line still override them.
+
+The file is a JSON object whose keys are among ``SETTINGS`` (each the ``TrainConfig`` field of that
+name), ``ppo`` (PPOConfig fields) and ``teacher_params`` (parameters of the file's ``teacher``);
+``tune`` records where the settings came from and is not read. Other keys are refused by name, so
+a typo never passes silently.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from learner.config import TrainConfig
+
+SETTINGS = ("teacher", "env", "workers", "envs_per_worker", "max_episode_steps", "loop")
+"""``TrainConfig`` fields a settings file may set."""
+NOTES_KEY = "tune"
+
+
+@dataclass(frozen=True)
+class ConfigFile:
+    settings: dict[str, Any] = field(default_factory=dict)
+    ppo: dict[str, Any] = field(default_factory=dict)
+    teacher_params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def teacher(self) -> str | None:
+        teacher = self.settings.get("teacher")
+        return str(teacher) if teacher is not None else None
+
+    def applied_to(self, base: TrainConfig, teacher: str | None = None) -> TrainConfig:
+        """``base`` with the file's settings on top. ``teacher`` is the kind the run will use after its
+        flags: the file's teacher parameters belong to the file's teacher and are left out for another."""
+        teacher_params = self.teacher_params if teacher is None or teacher == self.teacher else {}
+        return replace(
+            base,
+            **self.settings,
+            ppo=base.ppo.with_overrides(self.ppo),
+            teacher_overrides={**base.teacher_overrides, **teacher_params},
+        )
+
+
+def read_config_file(path: Path) -> ConfigFile:
+    """The file's settings, checked by name and built into a ``TrainConfig`` once; ``ValueError`` says what is wrong."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ValueError(f"cannot read the settings file {path}: {error.strerror}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"the settings file {path} is not valid JSON: {error}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"the settings file {path} must hold a JSON object")
+    unknown = sorted(set(data) - {*SETTINGS, "ppo", "teacher_params", NOTES_KEY})
+    if unknown:
+        raise ValueError(
+            f"the settings file {path} has unknown key(s) {', '.join(unknown)}; "
+            f"known: {', '.join((*SETTINGS, 'ppo', 'teacher_params', NOTES_KEY))}"
+        )
+    for key in ("ppo", "teacher_params"):
+        if not isinstance(data.get(key, {}), dict):
+            raise ValueError(f"the settings file {path}: {key} must be an object of name to value")
+    config_file = ConfigFile(
+        settings={key: data[key] for key in SETTINGS if key in data},
+        ppo=dict(data.get("ppo", {})),
+        teacher_params=dict(data.get("teacher_params", {})),
+    )
+    try:
+        config_file.applied_to(TrainConfig())
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"the settings file {path}: {error}") from None
+    return config_file
+
+
+class BakeoffConfigAction(argparse.Action):
+    """``bakeoff --config FILE``: the file's settings become the defaults of the bake-off's flags.
+
+    A flag that still holds its default takes the file's value, so a flag given after ``--config``,
+    or before it with another value, overrides the file. The file's PPO values go before any
+    ``--ppo`` (the later wins), its teacher's parameters apply to that teacher only (``KIND.NAME``),
+    and its teacher itself is not used: a bake-off names its own teachers.
+    """
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        path = Path(str(values))
+        try:
+            config_file = read_config_file(path)
+        except ValueError as error:
+            parser.error(str(error))
+        ppo = dict(config_file.ppo)
+        flags = {name: value for name, value in config_file.settings.items() if name != "teacher"}
+        if "rollout_length" in ppo:
+            flags["rollout_length"] = ppo.pop("rollout_length")  # the bake-off's own flag, which train puts last
+        for name, value in flags.items():
+            if getattr(namespace, name, None) == parser.get_default(name):
+                setattr(namespace, name, value)
+        namespace.ppo = [*ppo.items(), *(namespace.ppo or [])]
+        kind = config_file.teacher
+        if config_file.teacher_params and kind is None:
+            parser.error(f"the settings file {path} has teacher_params but no teacher they belong to")
+        teacher_params = [(f"{kind}.{name}", value) for name, value in config_file.teacher_params.items()]
+        namespace.teacher_params = [*teacher_params, *(namespace.teacher_params or [])]
+        setattr(namespace, self.dest, path)

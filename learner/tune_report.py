@@ -1,0 +1,233 @@
+"""What ``kuka-curriculum tune`` shows while it runs and writes when it ends.
+
+While it runs: one line each time a trial starts, reports a new best or ends (trials running,
+pending, finished, failed, and the best so far). At the end, in the tune directory:
+``trials.json`` (every trial's settings, status, final and best metrics, and its evaluation
+curve), ``curves.png`` (every trial's metric against steps) and ``best.json`` (the best finished
+trial's settings, in the settings-file form that ``train --config`` and ``bakeoff --config`` read).
+The curves come from each trial's own ``metrics.jsonl``, so they survive ``--resume``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ray.tune import Callback
+
+from learner.config_file import NOTES_KEY
+from learner.json_file import write_json
+from learner.metrics import METRICS_FILE
+from learner.tune_space import SearchSpace
+
+if TYPE_CHECKING:
+    from learner.tune import TuneSettings
+
+TRIALS_FILE = "trials.json"
+BEST_FILE = "best.json"
+CURVES_FILE = "curves.png"
+FINISHED, STOPPED, FAILED, UNFINISHED = "finished", "stopped early", "failed", "unfinished"
+
+
+class TuneProgress(Callback):
+    """Prints a status line whenever the picture changes: trials by state, and the best so far."""
+
+    def __init__(self, metric: str, trials: int) -> None:
+        self.metric = metric
+        self.trials = trials
+        self.started = time.monotonic()
+        self.best: tuple[float, str, float] | None = None
+        self.last_line = ""
+
+    def on_trial_start(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
+        self._print(trials)
+
+    def on_trial_result(
+        self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any], **info: Any
+    ) -> None:
+        value = result.get(self.metric)
+        if isinstance(value, (int, float)) and not math.isnan(value) and (self.best is None or value > self.best[0]):
+            self.best = (float(value), trial.trial_id, float(result.get("steps", 0)))
+        self._print(trials)
+
+    def on_trial_complete(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
+        self._print(trials)
+
+    def on_trial_error(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
+        print(f"trial {trial.trial_id} failed; its error is in {trial.path}, and trials.json at the end", flush=True)
+        self._print(trials)
+
+    def _print(self, trials: list[Any]) -> None:
+        counts = {state: sum(trial.status == state for trial in trials) for state in ("RUNNING", "PENDING", "ERROR")}
+        done = sum(trial.status == "TERMINATED" for trial in trials)
+        best = "none yet" if self.best is None else f"{self.best[0]:.3g} ({self.best[1]} at {self.best[2]:_.0f} steps)"
+        line = (
+            f"{counts['RUNNING']} running, {counts['PENDING']} pending, {done} finished, {counts['ERROR']} failed "
+            f"of {self.trials} | best {self.metric} so far: {best}"
+        )
+        if line != self.last_line:
+            self.last_line = line
+            print(f"[tune {time.monotonic() - self.started:6.0f}s] {line}", flush=True)
+
+
+@dataclass(frozen=True)
+class TuneReport:
+    summary: str
+    unfinished: int
+    best: dict[str, Any] | None
+
+
+def evaluation_curve(run_dir: Path) -> list[dict[str, float]]:
+    """The run's in-run evaluations by step; a step logged twice (a resumed run repeats the iterations
+    after its last checkpoint) keeps its latest record."""
+    path = Path(run_dir) / METRICS_FILE
+    by_step: dict[int, dict[str, float]] = {}
+    for line in path.read_text(encoding="utf-8").splitlines() if path.exists() else []:
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by a crash
+        if record.get("eval/success_rate") is not None:
+            by_step[int(record["step"])] = {
+                "steps": float(record["step"]),
+                "success": float(record["eval/success_rate"]),
+                "return": float(record["eval/return"]),
+            }
+    return [by_step[step] for step in sorted(by_step)]
+
+
+def _error(trial: Any) -> str | None:
+    """The exception's last line, from the trial's error file."""
+    path = trial.error_file
+    if not path or not Path(path).exists():
+        return None
+    lines = [line.strip() for line in Path(path).read_text(encoding="utf-8", errors="replace").splitlines()]
+    lines = [line for line in lines if line]
+    return lines[-1] if lines else None
+
+
+def _entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dict[str, Any]:
+    run_dir = runs_dir / trial.trial_id
+    curve = evaluation_curve(run_dir)
+    last = trial.last_result or {}
+    steps = int(curve[-1]["steps"]) if curve else 0
+    if trial.status == "ERROR":
+        status = FAILED
+    elif trial.status == "TERMINATED" and last.get("done"):
+        status = FINISHED if steps >= settings.total_steps else STOPPED
+    else:
+        status = UNFINISHED
+    best = max(curve, key=lambda point: point[settings.metric]) if curve else None
+    return {
+        "trial": trial.trial_id,
+        "status": status,
+        "config": {key: _plain(value) for key, value in trial.config.items()},
+        "final": curve[-1] if curve else None,
+        "best": best,
+        "error": _error(trial) if status == FAILED else None,
+        "run_dir": str(run_dir.relative_to(out)),
+        "curve": curve,
+    }
+
+
+def _plain(value: Any) -> Any:
+    value = value.item() if hasattr(value, "item") else value
+    return list(value) if isinstance(value, tuple) else value
+
+
+def best_settings(entry: dict[str, Any], settings: TuneSettings, metric_value: float) -> dict[str, Any]:
+    """The trial's settings as a settings file (``learner.config_file``): the fixed ones, its draws on top."""
+    chosen: dict[str, Any] = {
+        "teacher": settings.teacher,
+        "env": settings.env,
+        "workers": settings.workers,
+        "envs_per_worker": settings.envs_per_worker,
+        "ppo": dict(settings.ppo),
+        "teacher_params": dict(settings.teacher_params),
+    }
+    for key, value in entry["config"].items():
+        target, _, name = key.partition(".")
+        if target == "env":
+            chosen[name] = value
+        else:
+            chosen["ppo" if target == "ppo" else "teacher_params"][name] = value
+    chosen[NOTES_KEY] = {
+        "trial": entry["trial"],
+        "metric": settings.metric,
+        "value": metric_value,
+        "steps": entry["final"]["steps"],
+        "total_steps": settings.total_steps,
+    }
+    return chosen
+
+
+def _plot(path: Path, entries: list[dict[str, Any]], metric: str, best: str | None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(figsize=(8, 5))
+    for entry in entries:
+        if entry["curve"]:
+            steps = [point["steps"] for point in entry["curve"]]
+            values = [point[metric] for point in entry["curve"]]
+            bold = entry["trial"] == best
+            axes.plot(
+                steps, values, marker="o", linewidth=2.5 if bold else 1.0, label=f"{entry['trial']} ({entry['status']})"
+            )
+    axes.set_xlabel("environment steps")
+    axes.set_ylabel(f"{metric} on the hardest task (in-run evaluation)")
+    axes.set_title("kuka-curriculum tune: every trial" + (f"; best {best}" if best else ""))
+    axes.grid(alpha=0.3)
+    if any(entry["curve"] for entry in entries):
+        axes.legend(fontsize="small")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def write_reports(out: Path, settings: TuneSettings, space: SearchSpace, elapsed: float) -> TuneReport:
+    from ray.tune import ExperimentAnalysis
+
+    from learner.tune import EXPERIMENT, METRICS, RUNS_DIR
+
+    trials = ExperimentAnalysis(str(out / EXPERIMENT)).trials
+    entries = sorted((_entry(trial, settings, out / RUNS_DIR, out) for trial in trials), key=lambda e: e["trial"])
+    finished = [entry for entry in entries if entry["status"] == FINISHED]
+    # Ties (short tunes often end at 0% success for all) go to the other metric.
+    other = next(name for name in METRICS if name != settings.metric)
+    best_entry = max(finished, key=lambda entry: (entry["final"][settings.metric], entry["final"][other]), default=None)
+    best = None
+    if best_entry is not None:
+        best = best_settings(best_entry, settings, best_entry["final"][settings.metric])
+        write_json(out / BEST_FILE, best)
+    write_json(
+        out / TRIALS_FILE,
+        {
+            "metric": settings.metric,
+            "searched": [dimension.key for dimension in space.dimensions],
+            "best": best_entry["trial"] if best_entry else None,
+            "seconds": round(elapsed, 1),
+            "trials": entries,
+        },
+    )
+    _plot(out / CURVES_FILE, entries, settings.metric, best_entry["trial"] if best_entry else None)
+    lines = [f"{len(entries)} trials in {elapsed:.0f} s ({settings.metric} at the hardest task, final evaluation):"]
+    for entry in entries:
+        value = f"{entry['final'][settings.metric]:.3g}" if entry["final"] else "-"
+        drawn = ", ".join(f"{key}={value!r}" for key, value in entry["config"].items())
+        lines.append(f"  {entry['trial']}  {entry['status']:<13} {value:>6}  {drawn}")
+        if entry["error"]:
+            lines.append(f"      error: {entry['error']}")
+    if best_entry is None:
+        lines.append("no trial finished its budget, so there is no best.json")
+    else:
+        lines.append(f"best: {best_entry['trial']} -> {out / BEST_FILE}")
+    lines += [f"{out / TRIALS_FILE}", f"{out / CURVES_FILE}"]
+    unfinished = sum(entry["status"] == UNFINISHED for entry in entries)
+    return TuneReport("\n".join(lines), unfinished, best)

@@ -1,0 +1,227 @@
+"""``kuka-curriculum tune`` with real parts: a real teacher service, a real Ray cluster, the real training loop.
+
+One tune of 3 tiny trials is interrupted (SIGINT) once its first trial has a checkpoint and then
+finished with ``--resume``; its outputs serve several tests, and its best.json feeds ``train
+--config``. A second tune whose every trial raises shows a failure is recorded and the tune goes
+on. The budgets are two batches of 512 steps and episodes end within 150 steps, so the trials are short.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from kuka_curriculum import main
+from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.config_file import read_config_file
+from learner.tune_space import SearchSpaceError, parse_search_space
+
+TRIAL_FLAGS = ["--workers", "1", "--envs-per-worker", "2", "--ppo", "rollout_length=256", "--eval-episodes", "1"]
+TOTAL_STEPS = 1024
+SEARCH_SPACE = {
+    "learning_rate": {"loguniform": [1e-4, 1e-3]},
+    "fit_rate": {"choice": [100, 250]},
+    "max_episode_steps": {"randint": [100, 150]},
+}
+TIMEOUT_S = 300
+
+
+def _tune_command(out: Path, space: Path, *extra: str) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "kuka_curriculum",
+        "tune",
+        "--env",
+        "KukaGrasp-v0",
+        "--teacher",
+        "alp-gmm",
+        "--search-space",
+        str(space),
+        "--out",
+        str(out),
+        *TRIAL_FLAGS,
+        *extra,
+    ]
+
+
+def _run(command: list[str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(command, capture_output=True, text=True, timeout=TIMEOUT_S)
+
+
+@pytest.fixture(scope="module")
+def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    """A 3-trial tune, interrupted after its first checkpoint, then resumed to its end."""
+    root = tmp_path_factory.mktemp("tune")
+    space = root / "space.json"
+    space.write_text(json.dumps(SEARCH_SPACE), encoding="utf-8")
+    out = root / "out"
+    command = _tune_command(out, space, "--trials", "3", "--total-steps", str(TOTAL_STEPS), "--max-concurrent", "1")
+    interrupted = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + TIMEOUT_S
+    while not list(out.glob("runs/*/checkpoints/step_*.pt")):
+        if interrupted.poll() is not None:
+            pytest.fail(f"the tune ended before its first checkpoint:\n{interrupted.communicate()[0]}")
+        assert time.monotonic() < deadline, "no trial wrote a checkpoint"
+        time.sleep(0.2)
+    checkpoints_at_interrupt = sorted(path.name for path in out.glob("runs/*/checkpoints/step_*.pt"))
+    interrupted.send_signal(signal.SIGINT)
+    first_output, _ = interrupted.communicate(timeout=TIMEOUT_S)
+    resumed = _run(_tune_command(out, space, "--resume"))
+    return {
+        "out": out,
+        "first": (interrupted.returncode, first_output),
+        "checkpoints_at_interrupt": checkpoints_at_interrupt,
+        "resumed": resumed,
+    }
+
+
+def test_an_interrupted_tune_says_how_to_resume(tuned):
+    code, output = tuned["first"]
+    assert tuned["checkpoints_at_interrupt"], "the interrupt came after a trial's first checkpoint"
+    assert code == 130, output
+    assert "--resume continues them" in output
+    assert "dashboard:" in output and "running" in output  # the progress display
+
+
+def test_the_resumed_tune_writes_every_trial_and_the_best(tuned):
+    resumed, out = tuned["resumed"], tuned["out"]
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    report = json.loads((out / "trials.json").read_text(encoding="utf-8"))
+    assert len(report["trials"]) == 3
+    assert report["searched"] == ["ppo.learning_rate", "teacher.fit_rate", "env.max_episode_steps"]
+    statuses = {entry["status"] for entry in report["trials"]}
+    assert statuses <= {"finished", "stopped early"} and "finished" in statuses
+    for entry in report["trials"]:
+        config = entry["config"]
+        assert 1e-4 <= config["ppo.learning_rate"] <= 1e-3
+        assert config["teacher.fit_rate"] in (100, 250)
+        assert 100 <= config["env.max_episode_steps"] <= 150
+        curve = entry["curve"]
+        assert curve and all(0.0 <= point["success"] <= 1.0 for point in curve)
+        assert [point["steps"] for point in curve] == sorted({point["steps"] for point in curve})
+        if entry["status"] == "finished":
+            assert entry["final"]["steps"] >= TOTAL_STEPS
+        # Each trial trained its own run, with the settings it drew.
+        trained = load_checkpoint(latest_checkpoint(out / entry["run_dir"])).config
+        assert trained.ppo.learning_rate == config["ppo.learning_rate"]
+        assert trained.teacher_params["fit_rate"] == config["teacher.fit_rate"]
+        assert trained.max_episode_steps == config["env.max_episode_steps"]
+    assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
+
+    best = json.loads((out / "best.json").read_text(encoding="utf-8"))
+    chosen = next(entry for entry in report["trials"] if entry["trial"] == report["best"])
+    assert chosen["status"] == "finished"
+    assert best["ppo"] == {"rollout_length": 256, "learning_rate": chosen["config"]["ppo.learning_rate"]}
+    assert best["teacher_params"] == {"fit_rate": chosen["config"]["teacher.fit_rate"]}
+    assert best["max_episode_steps"] == chosen["config"]["env.max_episode_steps"]
+    finished = [entry for entry in report["trials"] if entry["status"] == "finished"]
+    assert chosen["final"]["success"] == max(entry["final"]["success"] for entry in finished)
+
+
+def test_resume_continues_the_interrupted_trial_from_its_checkpoint(tuned):
+    """A trial restarted from nothing would log its first iteration twice."""
+    for metrics in tuned["out"].glob("runs/*/metrics.jsonl"):
+        steps = [json.loads(line)["step"] for line in metrics.read_text(encoding="utf-8").splitlines()]
+        assert steps.count(steps[0]) == 1, metrics
+
+
+def test_every_trial_had_its_curriculum_on_the_one_service(tuned):
+    """The service the tune started kept its curricula in the tune directory: one per trial, as drawn."""
+    import httpx
+
+    from teacher_service.process import ServiceProcess
+
+    out = tuned["out"]
+    report = json.loads((out / "trials.json").read_text(encoding="utf-8"))
+    service = ServiceProcess(out / "teacher.sqlite", log_path=out / "teacher-after.log").start(60)
+    try:
+        listed = httpx.get(f"{service.url}/api/v1/curricula", timeout=10).json()["curricula"]
+    finally:
+        service.stop(15)
+    registered = {curriculum["name"]: curriculum["config"] for curriculum in listed}
+    for entry in report["trials"]:
+        config = registered[f"out-{entry['trial']}"]
+        assert config["teacher"] == "alp-gmm"
+        assert config["params"]["fit_rate"] == entry["config"]["teacher.fit_rate"]
+
+
+def test_train_accepts_the_best_settings_and_flags_override_them(tuned, tmp_path):
+    best_path = tuned["out"] / "best.json"
+    best = read_config_file(best_path)
+    run_dir = tmp_path / "run"
+    trained = _run(
+        [
+            sys.executable,
+            "-m",
+            "kuka_curriculum",
+            "train",
+            "--config",
+            str(best_path),
+            "--total-steps",
+            "512",
+            "--eval-every",
+            "0",
+            "--ppo",
+            "entropy_coef=0.01",
+            "--envs-per-worker",
+            "1",
+            "--run-dir",
+            str(run_dir),
+        ]
+    )
+    assert trained.returncode == 0, trained.stdout + trained.stderr
+    config = load_checkpoint(latest_checkpoint(run_dir)).config
+    assert config.ppo.learning_rate == best.ppo["learning_rate"]
+    assert config.teacher_params["fit_rate"] == best.teacher_params["fit_rate"]
+    assert config.ppo.entropy_coef == 0.01 and config.envs_per_worker == 1
+
+
+def test_a_trial_that_raises_is_recorded_failed_and_the_tune_goes_on(tmp_path):
+    """0.9 is within random_task_ratio's bounds, but with the KUKA default target_task_ratio (0.2) the
+    two add up to more than 1, which the service refuses when the trial registers its curriculum."""
+    space = tmp_path / "space.yaml"
+    space.write_text("random_task_ratio:\n  choice: [0.9]\n", encoding="utf-8")
+    out = tmp_path / "out"
+    result = _run(_tune_command(out, space, "--trials", "2", "--total-steps", "512", "--max-concurrent", "1"))
+    assert result.returncode == 1, result.stdout + result.stderr
+    report = json.loads((out / "trials.json").read_text(encoding="utf-8"))
+    assert [entry["status"] for entry in report["trials"]] == ["failed", "failed"]
+    assert all("random_task_ratio" in entry["error"] for entry in report["trials"])
+    assert "no trial finished" in result.stdout
+    assert not (out / "best.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("space", "message"),
+    [
+        ({"learning_rat": {"uniform": [0.1, 0.2]}}, "learning_rat: no such setting"),
+        ({"fit_rate": {"choice": [1, 100]}}, "fit_rate: cannot be 1: Input should be greater than or equal to 2"),
+        ({"gamma": {"uniform": [0.9, 1.5]}}, "gamma: cannot be 1.5: gamma must be in [0, 1]"),
+        ({"update_epochs": {"uniform": [2, 8]}}, "update_epochs: cannot be 2.0"),
+        ({"max_episode_steps": {"randint": [0, 10]}}, "max_episode_steps: cannot be 0"),
+        ({"learning_rate": {"loguniform": [0, 1e-3]}}, "learning_rate: loguniform needs low > 0"),
+        ({"learning_rate": {"normal": [0, 1]}}, "learning_rate: unknown distribution 'normal'"),
+        ({"teacher.gamma": {"choice": [0.5]}}, "teacher.gamma: no such setting; known parameters of alp-gmm"),
+    ],
+)
+def test_a_bad_search_space_names_the_setting(space, message):
+    with pytest.raises(SearchSpaceError) as refused:
+        parse_search_space(space, "alp-gmm")
+    assert message in str(refused.value)
+
+
+def test_a_refused_search_space_stops_the_command_before_anything_trains(tmp_path, capsys):
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps({"fit_rate": {"randint": [100, 100_000_000]}}), encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["tune", "--search-space", str(space), "--out", str(out), "--trials", "2"]) == 2
+    error = capsys.readouterr().err
+    assert "fit_rate: cannot be 100000000" in error and str(space) in error
+    assert not out.exists()
