@@ -4,8 +4,10 @@
 # alike: no `# syntax=` line (BuildKit would fetch that frontend from Docker Hub) and no `RUN --mount`.
 #
 # Where everything comes from is a build argument, so the image also builds air-gapped (docs/deployment.md):
-#   BASE_IMAGE       any image with Python 3.11+ and its venv module as `python3` (default: the slim Python image)
-#   TORCH_INDEX_URL  the PyTorch wheel index: CPU by default, e.g. .../whl/cu126 for a CUDA build
+#   BASE_IMAGE       any image with Python 3.11 (the lock's torch is a cp311 wheel) and its venv module as
+#                    `python3` (default: the slim Python image)
+#   TORCH_INDEX_URL  the PyTorch wheel index: CPU, as the lock pins torch's CPU build; a CUDA image needs
+#                    that build in constraints.txt (e.g. torch==2.13.0+cu126), `make lock`, and its index
 #   PIP_INDEX_URL    the index for every other wheel (default PyPI)
 #   PIP_FIND_LINKS   a wheelhouse URL (a directory listing); with PIP_NO_INDEX=1 it is the only source
 ARG BASE_IMAGE=python:3.11-slim
@@ -31,24 +33,26 @@ RUN python3 -m venv /opt/venv
 WORKDIR /app
 
 # Dependencies before the code, each in its own layer, so that a change to the code rebuilds in seconds.
-# torch first, from its own index: the install below then finds it satisfied instead of pulling
-# PyPI's multi-GB CUDA build into the CPU image.
-# Its C++ headers and its own test suite (150 MB) serve only extension builds and torch's developers.
-COPY constraints.txt ./
-RUN pip install --index-url "$TORCH_INDEX_URL" --constraint constraints.txt torch \
+# Every version comes from requirements.txt, the runtime lock (`make lock`), and pip checks each wheel
+# against the lock's hashes, so the image holds the releases the dev venv is tested with.
+# torch first, from its own index: the lock pins its CPU build (2.13.0+cpu), which only that index (or
+# a wheelhouse) has. Its C++ headers and its own test suite (150 MB) serve only extension builds and
+# torch's developers.
+COPY requirements.txt ./
+RUN awk '/^torch==/ { keep = 1; print; next } keep && /^ +--hash/ { print; next } { keep = 0 }' requirements.txt \
+        > /tmp/torch.txt \
+    && pip install --index-url "$TORCH_INDEX_URL" --no-deps --require-hashes --requirement /tmp/torch.txt \
+    && rm /tmp/torch.txt \
     && rm -rf /opt/venv/lib/python3*/site-packages/torch/include /opt/venv/lib/python3*/site-packages/torch/test
 
-# The project's core dependencies as pyproject.toml lists them (no extras: no dev tools, no ffmpeg);
-# ray[default] adds the dashboard the head publishes, and setuptools is the project's build backend
-# (installed here, so the project's own install needs no index). The packages' bundled test suites
-# go in the same layer, or they would still weigh on the image.
-COPY pyproject.toml ./
-RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
-        > /tmp/requirements.txt \
-    && pip install --constraint constraints.txt --requirement /tmp/requirements.txt "ray[default]" "setuptools>=68" \
-    && rm /tmp/requirements.txt \
+# The rest of the lock: the core dependencies, ray[default] (the dashboard the head publishes: the stack
+# extra) and setuptools, the project's build backend (so the project's own install needs no index), with
+# no dev tools and no ffmpeg. The packages' bundled test suites go in the same layer, or they would still
+# weigh on the image.
+RUN pip install --require-hashes --requirement requirements.txt \
     && find /opt/venv/lib -depth -type d -name tests -path '*/site-packages/*' -exec rm -rf {} +
 
+COPY pyproject.toml ./
 COPY README.md ./
 COPY kuka_curriculum.py ./
 COPY common ./common

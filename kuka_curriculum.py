@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from importlib import metadata
 from typing import NamedTuple, Protocol
 
 
@@ -80,11 +81,20 @@ COMMANDS: dict[str, Command] = {
 }
 
 
+def _version() -> str:
+    """The installed distribution's version: pyproject.toml's, which is what pip and a bug report see."""
+    try:
+        return metadata.version("kuka-curriculum")
+    except metadata.PackageNotFoundError:  # run from a checkout that was never installed
+        return "(not installed)"
+
+
 def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kuka-curriculum",
         description="Curriculum learning for a simulated KUKA grasping arm.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, command in COMMANDS.items():
         command_parser = sub.add_parser(name, help=command.summary.replace("%", "%%"), description=command.summary)

@@ -34,6 +34,9 @@ PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
 """The teacher's address as a person's browser reaches it, when it differs from ``--teacher-url``
 (in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
 RAY_NAMESPACE = "kuka-curriculum"
+RAY_AUTH_MODE_VARIABLE = "RAY_AUTH_MODE"
+"""Unset, Ray turns token authentication on for a new local cluster and warns that it chose so; set to
+Ray's own choice before Ray is imported (it reads the mode once), it keeps that and drops the warning."""
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint, and a run
 stopped before its budget exits 128 + the signal's number (130, 143), as a shell reports a signal."""
@@ -269,6 +272,8 @@ def _check_reachable(ray_address: str) -> None:
 def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack) -> None:
     import logging
 
+    if address is None and "ray" not in sys.modules:
+        os.environ.setdefault(RAY_AUTH_MODE_VARIABLE, "token")
     import ray
 
     options: dict[str, Any] = {"log_to_driver": False, "logging_level": logging.WARNING, "namespace": RAY_NAMESPACE}

@@ -460,8 +460,18 @@ def test_image_starts_the_console_script(capsys: pytest.CaptureFixture[str]) -> 
 def test_torch_comes_from_the_index_the_build_argument_names() -> None:
     default_index = dockerfile_argument_defaults()["TORCH_INDEX_URL"]
     assert default_index.endswith("/whl/cpu")
-    torch_install = next(run for run in dockerfile_values("RUN") if "constraints.txt torch" in run)
-    assert '--index-url "$TORCH_INDEX_URL"' in torch_install and "--constraint constraints.txt" in torch_install
+    torch_install = next(run for run in dockerfile_values("RUN") if "/^torch==/" in run)
+    assert '--index-url "$TORCH_INDEX_URL"' in torch_install and "--require-hashes" in torch_install
+
+
+def test_the_image_installs_every_dependency_from_the_lock_with_hashes() -> None:
+    """Each ``pip install`` takes its versions from requirements.txt (``make lock``), hashes checked; the
+    project itself comes last, without dependencies, so nothing is resolved afresh in the image."""
+    installs = [run for run in dockerfile_values("RUN") if "pip install" in run]
+    project_install = installs.pop()
+    assert "--no-deps" in project_install and project_install.split("&&")[0].rstrip().endswith(" .")
+    assert installs and all("--require-hashes --requirement" in run for run in installs)
+    assert any("--requirement requirements.txt" in run for run in installs)
 
 
 def test_build_arguments_in_env_example_match_the_dockerfile(

@@ -7,7 +7,7 @@ test kills the teacher's process and, in a second run, a whole worker container.
 What these machines lack is stood in for, as an air-gapped lab would: Docker Hub is unreachable, so
 the base image is a Debian rootfs made with ``debootstrap`` and ``docker import``; the wheels come
 from a wheelhouse served on the loopback (``PIP_FIND_LINKS`` with ``PIP_NO_INDEX=1``, the build that
-docs/deployment.md describes), filled once with ``pip download``.
+docs/deployment.md describes), filled once with ``pip download`` of the lock, requirements.txt.
 
 The engine is the test's own: ``dockerd`` on a private socket, stopped at the end, with its data
 root (the layer cache) and the wheelhouse in ``KC_DOCKER_CACHE`` (default
@@ -27,7 +27,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import tomllib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -169,25 +168,20 @@ def build_stand_in_base(environment: dict[str, str]) -> None:
         assert archive.wait() == 0, "tar of the stand-in rootfs failed"
 
 
-def image_requirements() -> list[str]:
-    """What the Dockerfile installs: torch, the core dependencies, ray[default] and the build backend."""
-    dependencies = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
-    return ["torch", *dependencies, "ray[default]", "setuptools>=68"]
-
-
 def fill_wheelhouse(wheelhouse: Path, environment: dict[str, str]) -> None:
-    """``pip download`` every wheel the image needs, once per set of requirements and pins.
+    """``pip download`` every wheel the image installs, the runtime lock's, once per version of the lock.
 
-    The host's pip takes torch's CPU build from the machine's local wheels, as the README's install does.
+    The host's pip takes torch's CPU build from the machine's local wheels, as the README's install does;
+    pip checks every download against the lock's hashes, as the image build does again.
     """
-    requirements = image_requirements()
-    stamp = hashlib.sha256("\n".join([*requirements, (ROOT / "constraints.txt").read_text()]).encode()).hexdigest()
+    lock = ROOT / "requirements.txt"
+    stamp = hashlib.sha256(lock.read_bytes()).hexdigest()
     stamp_file = wheelhouse / ".requirements-sha256"
     if stamp_file.is_file() and stamp_file.read_text() == stamp:
         return
     wheelhouse.mkdir(parents=True, exist_ok=True)
     run([sys.executable, "-m", "pip", "download", "--quiet", "--dest", str(wheelhouse),
-         "--constraint", str(ROOT / "constraints.txt"), *requirements], environment)  # fmt: skip
+         "--require-hashes", "--requirement", str(lock)], environment)  # fmt: skip
     stamp_file.write_text(stamp)
 
 

@@ -18,7 +18,7 @@ PACKAGES = ("common", "teacher_service", "rollout_worker", "learner")
 DISPATCHER = "kuka_curriculum"
 
 MAY_IMPORT: dict[str, set[str]] = {
-    "common": set(),
+    "common": {"common.kuka"},  # importing common registers the KUKA environments, as before the rooms
     "common.client": set(),
     "common.kuka": {"common.client"},
     "common.policy": {"common.client"},
