@@ -47,6 +47,12 @@ match, so changing a parameter runs anew beside the old lines. The summary table
 covers every line in the file, not only this invocation's. One file holds one ``--episodes``; an
 unfinished last line (a kill mid-write) is dropped.
 
+``--in-process`` plays our kinds in the driver's process instead (``make_teacher``, then
+``sample(1)`` and ``learn_and_fit`` per episode): the same calls in the same order as the service
+makes with ``--batch 1``, which installs each due fit before the next draw, so the same tasks and
+scores at a fraction of the cost (HTTP, the store and the fit process), for a busy machine. Its
+runs are recorded as such (``"in_process": true``) and count as ours in the comparison.
+
 ``--jobs N`` plays N runs at once in N processes, each with its own service; the driver alone writes
 the results file. A run's score does not depend on it (each run is its own seeded curriculum and
 toy); its recorded seconds then include the other jobs' contention.
@@ -91,8 +97,9 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from common.client.schemas import API_PREFIX
+from common.client.task_space import Parameter, TaskSpace
 from teacher_service.process import ServiceProcess
-from teacher_service.teachers import TEACHER_KINDS
+from teacher_service.teachers import TEACHER_KINDS, EpisodeResult, make_teacher
 from teacher_service.teachers.currot import CurrotParams
 from teacher_service.teachers.self_paced import SelfPacedParams
 
@@ -180,6 +187,8 @@ class RunId:
     batch: int
     """Tasks drawn per request; the reference draws one per update."""
     episodes: int
+    in_process: bool = False
+    """Ours played in the driver's process (``--in-process``) rather than over HTTP."""
 
 
 @dataclass(frozen=True)
@@ -206,6 +215,7 @@ class Run:
             "params": json.loads(self.id.params),
             "batch": self.id.batch,
             "episodes": self.id.episodes,
+            **({"in_process": True} if self.id.in_process else {}),
             "mastered": mastered,
             "refused": self.refused,
             "seconds": round(self.seconds, 1),
@@ -224,6 +234,7 @@ class Run:
                 canonical(record["params"]),
                 int(record["batch"]),
                 int(record["episodes"]),
+                bool(record.get("in_process", False)),
             ),
             None if mastered is None else {int(c): float(m) for c, m in mastered.items()},
             record["refused"],
@@ -335,6 +346,28 @@ class ServiceRunner:
             if response.json()["counters"]["fits_pending"] == 0:
                 return
             time.sleep(FIT_POLL_S)
+
+
+def run_in_process(
+    kind: str, dims: int, seed: int, params: dict[str, Any], checkpoints: list[int], bar: Progress
+) -> dict[int, float] | str:
+    """One of our kinds on the toy without the service (see ``--in-process``); the reason when the
+    kind refuses this space or these parameters."""
+    space = TaskSpace([Parameter(**parameter) for parameter in toy_space(dims)])
+    try:
+        teacher = make_teacher(kind, space, seed, params)
+    except ValueError as error:
+        return str(error)[:300]
+    toy = Toy()
+    names = [f"x{i}" for i in range(dims)]
+
+    def step(at_most: int) -> int:
+        task = teacher.sample(1)[0]
+        teacher.learn_and_fit(EpisodeResult(task, toy.episode(np.array([task[name] for name in names]))))
+        bar.update(1)
+        return 1
+
+    return play(toy, checkpoints[-1], checkpoints, step)
 
 
 @contextmanager
@@ -515,16 +548,18 @@ def label(run_id: RunId) -> str:
         text += " " + ",".join(f"{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in params.items())
     if run_id.batch != 1:
         text += f" batch {run_id.batch}"
+    if run_id.in_process:
+        text += " (in process)"
     return text
 
 
 def summarise(runs: list[Run], checkpoints: list[int]) -> str:
     """Mean score per (space, teacher, parameters) over the seeds it has, and ours against the reference."""
-    groups: dict[tuple[int, str, str, str, int], list[tuple[int, dict[int, float]]]] = {}
-    labels: dict[tuple[int, str, str, str, int], str] = {}
+    groups: dict[tuple[int, str, str, str, int, bool], list[tuple[int, dict[int, float]]]] = {}
+    labels: dict[tuple[int, str, str, str, int, bool], str] = {}
     refused: dict[str, str] = {}
     for run in runs:
-        key = (run.id.dims, run.id.teacher, run.id.implementation, run.id.params, run.id.batch)
+        key = (run.id.dims, run.id.teacher, run.id.implementation, run.id.params, run.id.batch, run.id.in_process)
         labels[key] = label(run.id)
         if run.mastered is None:
             refused[f"{label(run.id)} on {run.id.dims}-D"] = str(run.refused)
@@ -538,16 +573,18 @@ def summarise(runs: list[Run], checkpoints: list[int]) -> str:
         + " episodes: mean over seeds, then the last checkpoint per seed",
         f"{'space':<6} {'teacher':<{width}} " + " ".join(f"{c:>7,}" for c in checkpoints) + "  seed:score (last)",
     ]
-    finals: dict[tuple[int, str, str, str, int], float] = {}
+    finals: dict[tuple[int, str, str, str, int, bool], float] = {}
     for key, members in sorted(groups.items()):
         means = [statistics.fmean(mastered[c] for _, mastered in members) for c in checkpoints]
         finals[key] = means[-1]
         per_seed = " ".join(f"{seed}:{mastered[last]:.0f}" for seed, mastered in sorted(members))
         lines.append(f"{key[0]}-D    {labels[key]:<{width}} " + " ".join(f"{m:7.1f}" for m in means) + f"  {per_seed}")
     for key, final in sorted(finals.items()):
-        dims, teacher, implementation, params, _ = key
+        dims, teacher, implementation, params, _, _ = key
         settings = reference_settings(teacher, dims, json.loads(params)) if implementation == "ours" else None
-        reference = None if settings is None else finals.get((dims, teacher, "reference", canonical(settings), 1))
+        reference = (
+            None if settings is None else finals.get((dims, teacher, "reference", canonical(settings), 1, False))
+        )
         if reference is not None:
             ratio = f"{final / reference:.2f}x" if reference > 0 else "n/a (reference 0)"
             lines.append(f"{dims}-D    {labels[key]}: ours / reference at {last:,} episodes = {ratio}")
@@ -612,7 +649,13 @@ def execute(
     # The reference builds float32 boxes from float64 bounds; gymnasium warns about each one.
     warnings.filterwarnings("ignore", message=".*precision lowered by casting to float32")
     episodes = checkpoints[-1]
-    ours = [run_id for run_id in todo if run_id.implementation == "ours"]
+    for run_id in [run_id for run_id in todo if run_id.in_process]:
+        start = time.perf_counter()
+        outcome = run_in_process(run_id.teacher, run_id.dims, run_id.seed, json.loads(run_id.params), checkpoints, bar)
+        refused = outcome if isinstance(outcome, str) else None
+        mastered = None if isinstance(outcome, str) else outcome
+        finish(Run(run_id, mastered, refused, time.perf_counter() - start, now_utc()))
+    ours = [run_id for run_id in todo if run_id.implementation == "ours" and not run_id.in_process]
     if ours:
         with (
             tempfile.TemporaryDirectory(prefix="teacher-toy-") as temp,
@@ -752,10 +795,17 @@ def main() -> None:
     parser.add_argument(
         "--out", type=Path, default=Path("teacher_toy.jsonl"), help="results file: one JSON line per run, resumed"
     )
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="play our kinds in process, without the service (same scores as --batch 1)",
+    )
     parser.add_argument("--json", type=Path, help="also write every run in the results file as one JSON document")
     args = parser.parse_args()
     if min(args.episodes, args.seeds, args.batch, args.jobs) < 1:
         parser.error("--episodes, --seeds, --batch and --jobs must be at least 1")
+    if args.in_process and args.batch != 1:
+        parser.error("--in-process plays one task at a time: it takes no --batch")
     kinds = [k for k in args.teachers.split(",") if k] or sorted(TEACHER_KINDS)
     unknown = sorted(set(kinds) - set(TEACHER_KINDS))
     if unknown:
@@ -778,7 +828,7 @@ def main() -> None:
         if other:
             parser.error(f"{args.out} holds runs of {other} episodes; a file holds one --episodes: give another --out")
         planned = [
-            RunId(dims, kind, "ours", seed, canonical(params.get(kind, {})), args.batch, args.episodes)
+            RunId(dims, kind, "ours", seed, canonical(params.get(kind, {})), args.batch, args.episodes, args.in_process)
             for dims, kind, seed in itertools.product(spaces, kinds, seeds)
         ] + [
             RunId(dims, kind, "reference", seed, canonical(settings), 1, args.episodes)

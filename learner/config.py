@@ -116,6 +116,7 @@ KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
     "adr": {"reward_range": [0.0, 10.0]},
     "self-paced": {"reward_range": [0.0, 10.0]},
     "manual": {"metric": "reward", "threshold": 5.5},
+    "currot": {"delta": 5.0},
 }
 """Teacher parameters for the KUKA curriculum, on top of each teacher's own defaults. ALP-GMM
 clusters learning progress together with task coordinates rescaled to [0, 1]; mapping the scaled
@@ -123,8 +124,9 @@ return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on 
 A fifth of its tasks are the hardest task: its other tasks rarely place the block in the outer
 part of the test's range, and without them one seed in three ended under 80% (BENCHMARKS.md, issue 18).
 ADR and self-paced map a KUKA return onto [0, 1] by [0, 10] (a grasp pays about +10) when a result
-carries no success, and the lesson plan moves on at the book's mean reward of 5.5: the kinds' own
-defaults learn the scale from the returns seen instead (issue 48)."""
+carries no success, the lesson plan moves on at the book's mean reward of 5.5, and CURROT holds a
+return to 5 (half a grasp) when results carry no success: the kinds' own defaults learn the scale
+from the returns seen instead (issue 48)."""
 
 
 def kuka_teacher_params(teacher: str, overrides: Mapping[str, Any]) -> dict[str, Any]:

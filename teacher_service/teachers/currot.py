@@ -2,47 +2,63 @@
 
 The curriculum is a cloud of task particles; each task is a particle picked at random plus a little
 uniform noise. Every ``update_every`` results the particles move toward a target distribution (by
-default samples of the uniform distribution over the box; optionally the space's hardest task)
-under two constraints: no particle moves further than ``max_move`` (a share of the box's diagonal),
-and a particle the student is estimated to master only moves to places where the estimated
-performance stays at or above the bar. The estimate is a Nadaraya-Watson (Gaussian kernel)
-regression over the last ``buffer_size`` results, with a length scale of 0.3 times the move radius,
-as in the reference.
+default samples of the uniform distribution over the box; optionally the space's hardest task),
+each at most ``max_move`` per update, and a particle the student is estimated to master only to
+places where the estimated performance stays at or above the bar.
 
-One update, following the reference code (github.com/psclklnk/currot, ``CurrOT``,
-``WassersteinSuccessBuffer`` and ``SamplingWassersteinInterpolation``): particles are matched one to
-one to target samples by an optimal-transport assignment (``scipy.optimize.linear_sum_assignment``
-on squared distances). A particle estimated at or above the bar tries ``candidates`` points in the
-half ball facing its target sample (radius: the move limit, or the distance to the target when that
-is less) and goes to the one closest to its target among those estimated at or above the bar,
-staying put when none is. A particle below the bar heads for a recent task that reached the bar,
-matched by the same kind of assignment; while no recent task has, for one that did better than
-the window's median (the reference's buffer keeps the better half until the bar is reached).
+One update follows the authors' main branch (github.com/psclklnk/currot: ``CurrOT``,
+``WassersteinSuccessBuffer``, ``SamplingWassersteinInterpolation``):
 
-Where ours differs from the reference, and why:
-- distances are measured in the box rescaled to [0, 1] per dimension (the reference uses raw
-  units, where a parameter spanning 0.04 next to one spanning 0.89 barely counts);
-- the estimate is fitted to a sliding window of recent results, averaging the 32 nearest at each
-  point, instead of the reference's buffer of successful (or, before the bar is reached, best)
-  tasks plus recent failures; the movement uses an exact assignment instead of sliced Wasserstein;
-- a particle below the bar walks at most ``max_move`` toward its matched task instead of being
-  replaced by it, so every particle's move is bounded;
-- the measure: when every result in the window reports ``success``, the estimate is a success
-  rate held to ``success_delta``; otherwise it is the return held to ``delta``. On KUKA a grasp is
-  worth about +10 and a failed episode ends around -2..+2, so the defaults, a return of 5 or a
-  success rate of 0.5, both mean "succeeds about half the time". Other reward scales need their
-  own ``delta`` (rewards in [0, 1]: 0.5).
+1. A lasting success buffer of at most ``particles`` tasks takes the new results. Until its median
+   performance exceeds the bar it keeps the better half of everything seen (a result joins when it
+   does at least as well as the buffer's median); after that, results at or above the bar replace
+   those below it, and once all are above it, an optimal-transport assignment to target samples
+   decides which successes stay. Results that do not join are failures.
+2. Once the particles' mean estimate has first reached the bar, the last ``buffer_size`` failures
+   are kept beside the success buffer; the performance estimate is a Nadaraya-Watson (Gaussian
+   kernel) regression over both, with a length scale of 0.3 times the move radius.
+3. Particles estimated below the bar are replaced by samples of the success buffer with Gaussian
+   noise (an optimal-transport assignment picks which): the noise is a quarter of the box per
+   dimension for a buffered task at the lowest performance of the first results and shrinks to
+   nothing at the bar, so while the student earns nothing anywhere the particles keep exploring the
+   whole box instead of standing still. Before the buffer's median reaches the bar, samples come
+   from its better half, favouring the better ones.
+4. Every particle is matched to a target sample by an optimal-transport assignment and tries
+   ``candidates`` points in a ball around it (radius: the move limit, or the distance to its target
+   when less; the half ball facing the target for particles at or above the bar, the full ball for
+   those that are not). It goes to the candidate closest to its target among those estimated at or
+   above the bar, or when none is, to the one with the best estimate.
+
+Where ours departs from the authors', and what it costs or gains:
+- ``distances`` = ``unit`` (default): distances, the move radius, the noise and the kernel length
+  scale are measured in the box rescaled to [0, 1] per dimension; the authors use raw units
+  (``raw``), where a parameter spanning 0.04 beside one spanning 0.89 barely counts. The two are the
+  same on a unit box (the toy); on KUKA raw units would leave the small ranges unexplored.
+- ``below_bar`` = ``jump`` (default, the authors'): a particle below the bar jumps to its success
+  sample. ``walk`` moves it at most ``max_move`` toward it, so every move is bounded: given to the
+  authors' code on the ALP-GMM paper's toy it cost 3 points from the easiest corner (76.7 to
+  73.7% mastered, 3 seeds); the noisy resampling, not the jump, is what rescues a uniform start.
+- ``max_move`` bounds the move; the authors' ``epsilon`` bounds its square (TeachMyAgent passes 5%
+  of the diagonal, a radius of 27% of a unit square's diagonal); give the radius you want.
+- The movement's assignment is exact (``scipy.optimize.linear_sum_assignment``) where the authors
+  use sliced Wasserstein; the estimate averages the 32 nearest buffered results at each point.
+- Until the particles' estimate first reaches the bar, failures are not kept (as the authors'), but
+  the decision is taken from the update installed when a new one falls due: a service that installs
+  updates late (the replay never does) can keep its first failures one update later.
+
+The measure: while every result so far reported ``success``, the estimate is a success rate held
+to ``success_delta``; otherwise it is the return held to ``delta``. Without ``delta`` (the default)
+the return bar is ``success_delta`` of the way from the lowest to the highest return seen so far,
+and no result meets it until two different returns were seen, so the defaults work on any reward
+scale. ``train`` passes 5.0 for KUKA (a grasp is worth about +10, a failure ends around -2..+2).
+
+On the ALP-GMM paper's toy (BENCHMARKS.md, issue 48), where only the corner cube pays at first, a
+uniform cloud of 200 particles misses it on about one seed in eight: the version before this one
+then never moved and mastered nothing; the noisy resampling finds it.
 
 When it helps: a student that learns nothing from the hardest tasks but can be led there through
 tasks it already half masters, in spaces where the way to the target is not a straight line;
 unlike SPDL's Gaussian, the particle cloud can take any shape.
-
-When it fails: particles only move toward tasks that did better than others, and tasks stay within
-``noise`` of a particle. If no particle starts where the student earns anything, every result is
-the same and nothing ever moves. On the ALP-GMM paper's toy, where only 1% of the space pays at
-first, 200 uniform particles miss it with probability 0.99^200 (13%): one seed in five mastered
-nothing (BENCHMARKS.md). Start near the easiest task (``start`` = easiest) when the student's
-first successes are known to lie there.
 """
 
 from __future__ import annotations
@@ -55,7 +71,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
@@ -64,23 +80,34 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
+from teacher_service.teachers.performance import ReturnScale
 from teacher_service.teachers.row_log import RowLog
 
 MAX_PARTICLES = 500
 MAX_BUFFER = 2000
-MAX_CANDIDATES = 64
-"""Together these bound one update: at most 500 x 65 points estimated from their nearest among
-2,000 results, and assignments of at most 500 particles to at most 2,000 tasks."""
+MAX_CANDIDATES = 128
+"""Together these bound one update: at most 500 x 128 points estimated from their nearest among
+2,500 buffered results, and assignments of at most 500 particles to at most 2,500 tasks."""
 
 LENGTHSCALE_SHARE = 0.3
-"""The performance model's kernel length scale as a share of the move radius (the reference's choice)."""
+"""The performance model's kernel length scale as a share of the move radius (the authors' choice)."""
 
 NEIGHBOURS = 32
-"""Results the estimate at a point averages over, the nearest (the reference also limits them): at
-this length scale farther ones weigh next to nothing, and an update takes about a third of the time."""
+"""Buffered results the estimate at a point averages over, the nearest (the authors' compiled
+estimator also limits them): at this length scale farther ones weigh next to nothing."""
+
+SEARCH_SHARE = 0.25
+"""The resampling noise's largest standard deviation, as a share of the box per dimension (the authors')."""
+
+MIN_NOISE_SHARE = 0.005
+"""The resampling noise's smallest standard deviation: this share of the squared move radius (the
+authors' ``0.005 * epsilon``, their epsilon being the squared radius)."""
+
+RESAMPLE_TRIES = 10
+"""Redraws of the resampling noise for a sample that fell outside the box, before it is clipped."""
 
 MAX_PENDING_FITS = 4
-"""Due fits whose starting particles are kept for ``refit_job``; an older one is superseded."""
+"""Due fits whose inputs are kept for ``refit_job``; an older one is superseded."""
 
 RECENT_MOVES = 100
 """Updates the state reports in ``moves``."""
@@ -88,29 +115,37 @@ RECENT_MOVES = 100
 UNKNOWN_SUCCESS = -1.0
 """The history's success column when a result did not say."""
 
-TOWARD_TARGET, TOWARD_SUCCESS, TOWARD_BETTER, STAYING = 0, 1, 2, 3
-WHY = ("toward the target", "toward a success", "toward the better half", "staying")
+TOWARD_TARGET, TO_BEST, REPLACED_TOWARD_TARGET, REPLACED_TO_BEST = 0, 1, 2, 3
+WHY = (
+    "toward the target",
+    "to the best estimate nearby",
+    "from the success buffer, then toward the target",
+    "from the success buffer, then to the best estimate nearby",
+)
 """Per-particle reasons for a move, as stored in a fit (codes) and told in ``moves`` (words)."""
 
 
 class CurrotParams(TeacherParams):
     particles: int = Field(default=200, ge=2, le=MAX_PARTICLES)
-    """Task particles; tasks are drawn from them. The authors used 100 to 500."""
+    """Task particles; tasks are drawn from them. The success buffer holds as many. The authors
+    used 100 to 500."""
     update_every: int = Field(default=50, ge=1, le=10_000)
     """Results between two particle updates (the authors: 50 episodes)."""
-    buffer_size: int = Field(default=400, ge=1, le=MAX_BUFFER)
-    """Recent results the performance estimate of an update is fitted to."""
+    buffer_size: int | None = Field(default=None, ge=1, le=MAX_BUFFER)
+    """Recent failures the performance estimate keeps beside the success buffer (once the
+    particles' estimate has first reached the bar); null: as many as there are particles (the
+    authors')."""
     max_move: float = Field(default=0.05, gt=0.0, le=1.0)
-    """Longest move of a particle in one update, as a share of the diagonal of the box rescaled to
-    [0, 1] per dimension. The authors' TeachMyAgent setting passes 5% of the diagonal as its epsilon,
-    which the reference code applies as a bound on the squared move, so its moves can be longer."""
-    delta: FiniteFloat = Field(default=5.0, ge=-1e9, le=1e9)
-    """The bar on the estimated return. KUKA: a grasp is worth about +10 and a failure ends around
-    -2..+2, so 5 means succeeding about half the time."""
+    """Longest move of a particle in one update, as a share of the box's diagonal (in the units of
+    ``distances``)."""
+    delta: FiniteFloat | None = Field(default=None, ge=-1e9, le=1e9)
+    """The bar on the estimated return, for results without ``success``. Null: ``success_delta`` of
+    the way from the lowest to the highest return seen so far (none meets it until two different
+    returns were seen), so any reward scale works. KUKA (``train``): 5, a grasp being worth about +10."""
     success_delta: float = Field(default=0.5, ge=0.0, le=1.0)
-    """The bar on the estimated success rate, used instead of ``delta`` when every result in an
-    update's window reports ``success``."""
-    candidates: int = Field(default=32, ge=1, le=MAX_CANDIDATES)
+    """The bar on the estimated success rate, used while every result reports ``success``; without
+    ``delta``, also the share of the returns' range seen that the return bar lies at."""
+    candidates: int = Field(default=100, ge=1, le=MAX_CANDIDATES)
     """Points tried in the ball around each particle per update (the authors: 100)."""
     noise: float = Field(default=0.001, ge=0.0, le=0.5)
     """Half-width of the uniform noise added to a particle to make a task, per dimension in units of
@@ -124,28 +159,71 @@ class CurrotParams(TeacherParams):
     start_spread: float = Field(default=0.1, ge=0.0, le=10.0)
     """With ``start`` = easiest: standard deviation of the particles around it, per dimension in
     units of the dimension's width, clipped to the box."""
+    below_bar: Literal["jump", "walk"] = "jump"
+    """A particle estimated below the bar jumps to its sample of the success buffer (the authors'),
+    or walks at most ``max_move`` toward it (cost measured on the toy: see the module docstring)."""
+    distances: Literal["unit", "raw"] = "unit"
+    """Distances measured in the box rescaled to [0, 1] per dimension, or in the task's own units
+    (the authors')."""
 
-    @model_validator(mode="after")
-    def _consistent(self) -> CurrotParams:
-        if self.buffer_size < self.update_every:
-            raise ValueError(
-                f"buffer_size ({self.buffer_size}) cannot be less than update_every ({self.update_every}): "
-                "an update would ignore some of the results since the last one"
-            )
-        return self
+
+@dataclass(frozen=True)
+class FitInputs:
+    """What one update starts from, fixed when it falls due: the particles (unit coordinates), the
+    success buffer and the kept failures (rows of unit task and performance), the bar (``None``:
+    no bar yet), the lowest performance of the first results, and the two flags of the authors'
+    code: the buffer's median has exceeded the bar; the particles' estimate has reached it."""
+
+    particles: np.ndarray
+    successes: np.ndarray
+    failures: np.ndarray
+    measure: str
+    bar: float | None
+    floor: float
+    buffer_reached: bool
+    threshold_reached: bool
+
+    def export(self) -> dict[str, Any]:
+        return {
+            "particles": self.particles.tolist(),
+            "successes": self.successes.tolist(),
+            "failures": self.failures.tolist(),
+            "measure": self.measure,
+            "bar": self.bar,
+            "floor": self.floor,
+            "buffer_reached": self.buffer_reached,
+            "threshold_reached": self.threshold_reached,
+        }
+
+    @classmethod
+    def load(cls, data: Mapping[str, Any], dims: int) -> FitInputs:
+        def rows(name: str, width: int) -> np.ndarray:
+            return np.array(data[name], dtype=np.float64).reshape(-1, width)
+
+        return cls(
+            rows("particles", dims),
+            rows("successes", dims + 1),
+            rows("failures", dims + 1),
+            str(data["measure"]),
+            None if data["bar"] is None else float(data["bar"]),
+            float(data["floor"]),
+            bool(data["buffer_reached"]),
+            bool(data["threshold_reached"]),
+        )
 
 
 @dataclass(frozen=True)
 class ParticleFit:
-    """The output of one update: the new particles (unit coordinates), the estimate at each, and
-    why each moved (``TOWARD_TARGET``, ``TOWARD_SUCCESS``, ``TOWARD_BETTER`` or ``STAYING``)."""
+    """The output of one update: the new particles (unit coordinates), the estimate at each, why
+    each moved (codes of ``WHY``), and whether the particles' estimate has reached the bar."""
 
     index: int
     particles: np.ndarray
     values: np.ndarray
     why: np.ndarray
     measure: str
-    bar: float
+    bar: float | None
+    threshold_reached: bool
 
 
 def squared_distances(points: np.ndarray, others: np.ndarray) -> np.ndarray:
@@ -173,6 +251,86 @@ def estimate_performance(
     return estimates
 
 
+def update_successes(
+    buffer: np.ndarray,
+    batch: np.ndarray,
+    dims: int,
+    bar: float,
+    reached: bool,
+    capacity: int,
+    targets: Callable[[], np.ndarray],
+    scale: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The authors' ``WassersteinSuccessBuffer.update`` on rows that start with a unit task of
+    ``dims`` coordinates and end with a performance: the new buffer, which of ``batch`` failed to
+    join it, and whether its median has exceeded ``bar``. ``targets()`` draws target samples (unit
+    coordinates), needed only once the buffer is full of successes; ``scale`` turns unit
+    coordinates into the units distances are measured in."""
+    performance, new = buffer[:, -1], batch[:, -1]
+    if not reached:
+        buffer = buffer[np.argsort(performance, kind="stable")]
+        middle = len(buffer) // 2
+        median = buffer[middle, -1] if len(buffer) else -math.inf
+        joins = new >= median
+        joined = int(joins.sum())
+        merged = np.concatenate([batch[joins], buffer[min(middle + 1, joined) :]])
+        kept = np.argsort(merged[:, -1], kind="stable")[-capacity:]
+        failed = ~joins
+        failed[joins] = ~np.isin(np.arange(joined), kept)
+        return merged[kept], failed, bool(len(buffer) and median > bar)
+    joins = new >= bar
+    joined = int(joins.sum())
+    if not joined:
+        return buffer, ~joins, True
+    below = performance < bar
+    if not below.any() and len(buffer) >= capacity:
+        extended = np.concatenate([buffer, batch[joins]])
+        rows, _ = linear_sum_assignment(squared_distances(extended[:, :dims] * scale, targets() * scale))
+        joins[joins] = np.isin(np.arange(joined) + len(buffer), rows)
+        return extended[np.sort(rows)], ~joins, True
+    if joined < below.sum():
+        below = np.zeros(len(buffer), dtype=bool)
+        below[np.argpartition(performance, joined)[:joined]] = True
+    return np.concatenate([batch[joins], buffer[~below]])[:capacity], ~joins, True
+
+
+def resample_successes(
+    rng: np.random.Generator, inputs: FitInputs, count: int, scale: np.ndarray, min_std: float
+) -> np.ndarray:
+    """The authors' ``read_update``: ``count`` samples of the success buffer with Gaussian noise
+    whose spread grows from ``min_std`` at the bar to a quarter of the box at the lowest performance
+    of the first results; until the buffer's median exceeds the bar, drawn from its better half in
+    proportion to how much better than its median each did. Unit coordinates, in the box."""
+    tasks, performance = inputs.successes[:, :-1], inputs.successes[:, -1]
+    bar = math.inf if inputs.bar is None else inputs.bar
+    if not math.isfinite(bar):
+        shares = np.ones(len(performance))
+    elif bar - inputs.floor <= 0.0:
+        shares = (performance < bar).astype(np.float64)
+    else:
+        shares = np.clip(bar - performance, 0.0, None) / (bar - inputs.floor)
+    stds = min_std / scale + shares[:, None] * SEARCH_SHARE
+    if not inputs.buffer_reached:
+        middle = len(performance) // 2
+        weights = performance[middle:] - performance[middle - 1]
+        total = weights.sum()
+        probabilities = np.full(len(weights), 1.0 / len(weights)) if total == 0 else weights / total
+        picks = middle + rng.choice(len(weights), count, p=probabilities)
+    else:
+        picks = np.concatenate([np.arange(len(tasks)), rng.choice(len(tasks), max(count - len(tasks), 0))])
+    centres, spreads = tasks[picks], stds[picks]
+    samples = centres + spreads * rng.standard_normal(centres.shape)
+    for _ in range(RESAMPLE_TRIES):
+        outside = np.any((samples < 0.0) | (samples > 1.0), axis=-1)
+        if not outside.any():
+            break
+        samples[outside] = centres[outside] + spreads[outside] * rng.standard_normal(
+            (int(outside.sum()), tasks.shape[1])
+        )
+    clipped: np.ndarray = np.clip(samples, 0.0, 1.0)
+    return clipped
+
+
 def _assign(sources: np.ndarray, destinations: np.ndarray) -> np.ndarray:
     """For each source, the destination an optimal-transport assignment on squared distances gives
     it; destinations are repeated when there are fewer of them than sources."""
@@ -185,10 +343,17 @@ def _assign(sources: np.ndarray, destinations: np.ndarray) -> np.ndarray:
 
 
 def _ball(
-    rng: np.random.Generator, centres: np.ndarray, toward: np.ndarray, radii: np.ndarray, count: int
+    rng: np.random.Generator,
+    centres: np.ndarray,
+    toward: np.ndarray,
+    radii: np.ndarray,
+    half: np.ndarray,
+    count: int,
+    box: np.ndarray,
 ) -> np.ndarray:
-    """``count`` points uniform in the half ball of radius ``radii[i]`` around each centre that faces
-    ``toward[i]`` (points behind are mirrored in front), shape (n, count, d), clipped to the unit box."""
+    """``count`` points uniform in the ball of radius ``radii[i]`` around each centre, or where
+    ``half[i]`` the half ball facing ``toward[i]`` (points behind are mirrored in front), shape
+    (n, count, d), clipped to the box [0, ``box``]."""
     n, dims = centres.shape
     directions = rng.standard_normal((n, count, dims))
     directions /= np.maximum(np.linalg.norm(directions, axis=-1, keepdims=True), 1e-300)
@@ -196,62 +361,77 @@ def _ball(
     heading = toward - centres
     heading /= np.maximum(np.linalg.norm(heading, axis=-1, keepdims=True), 1e-300)
     along = np.einsum("nkd,nd->nk", offsets, heading)
-    offsets -= 2.0 * np.minimum(along, 0.0)[..., None] * heading[:, None, :]
-    points: np.ndarray = np.clip(centres[:, None, :] + radii[:, None, None] * offsets, 0.0, 1.0)
+    offsets -= 2.0 * (np.minimum(along, 0.0) * half[:, None])[..., None] * heading[:, None, :]
+    points: np.ndarray = np.clip(centres[:, None, :] + radii[:, None, None] * offsets, 0.0, box)
     return points
 
 
 def move_particles(
     index: int,
-    particles: np.ndarray,
-    tasks: np.ndarray,
-    performance: np.ndarray,
-    measure: str,
-    bar: float,
+    inputs: FitInputs,
     radius: float,
     candidates: int,
     target: np.ndarray | None,
+    scale: np.ndarray,
+    walk: bool,
     random_state: int,
 ) -> ParticleFit:
-    """One CURROT update in unit coordinates (see the module docstring). ``target`` is a point, or
-    ``None`` for samples of the uniform distribution; ``radius`` bounds every particle's move."""
+    """One CURROT update (see the module docstring). Geometry runs in unit coordinates times
+    ``scale`` (ones, or the parameters' widths); ``radius`` is the longest move in those units;
+    ``target`` is a unit point, or ``None`` for samples of the uniform distribution; ``walk`` bounds
+    the move of a replaced particle too."""
     rng = np.random.Generator(np.random.PCG64(random_state))
-    n, dims = particles.shape
-    estimate = functools.partial(estimate_performance, tasks, performance, LENGTHSCALE_SHARE * radius)
+    n, dims = inputs.particles.shape
+    bar = math.inf if inputs.bar is None else inputs.bar
+    known = np.concatenate([inputs.failures, inputs.successes])
+    estimate = functools.partial(estimate_performance, known[:, :-1] * scale, known[:, -1], LENGTHSCALE_SHARE * radius)
+    particles = inputs.particles * scale
     here = estimate(particles)
-    samples = rng.random((n, dims)) if target is None else np.tile(target, (n, 1))
-    goals = _assign(particles, samples)
-    moved = particles.copy()
-    why = np.full(n, STAYING, dtype=np.int64)
+    threshold_reached = inputs.threshold_reached or bool(here.mean() >= bar)
 
-    above = np.flatnonzero(here >= bar)
-    if len(above):
-        start, goal = particles[above], goals[above]
-        radii = np.minimum(radius, np.linalg.norm(goal - start, axis=-1))
-        ball = np.concatenate([start[:, None, :], _ball(rng, start, goal, radii, candidates)], axis=1)
-        ball_estimates = estimate(ball.reshape(-1, dims)).reshape(len(above), candidates + 1)
-        ball_estimates[:, 0] = here[above]  # staying put is always allowed, whatever the batching
-        to_goal = np.linalg.norm(ball - goal[:, None, :], axis=-1)
-        closest_allowed = np.argmin(np.where(ball_estimates >= bar, to_goal, np.inf), axis=1)
-        moved[above] = ball[np.arange(len(above)), closest_allowed]
-        why[above] = TOWARD_TARGET
+    reached = here >= bar
+    replaced = ~reached
+    if replaced.any():
+        samples = resample_successes(rng, inputs, n, scale, MIN_NOISE_SHARE * radius**2) * scale
+        valid = estimate(samples) >= bar
+        if valid.sum() >= replaced.sum():
+            samples, valid = samples[valid], valid[valid]
+        _, picked = linear_sum_assignment(squared_distances(particles[replaced], samples))
+        if walk:
+            heading = samples[picked] - particles[replaced]
+            length = np.linalg.norm(heading, axis=-1, keepdims=True)
+            particles[replaced] += heading * np.minimum(1.0, radius / np.maximum(length, 1e-300))
+            reached[replaced] = estimate(particles[replaced]) >= bar
+        else:
+            particles[replaced] = samples[picked]
+            reached[replaced] = valid[picked]
 
-    below = np.flatnonzero(here < bar)
-    reached = performance >= bar
-    if np.any(reached):
-        better, code = tasks[reached], TOWARD_SUCCESS
-    else:
-        better, code = tasks[performance > np.median(performance)], TOWARD_BETTER
-    if len(below) and len(better):
-        heading = _assign(particles[below], better) - particles[below]
-        length = np.linalg.norm(heading, axis=-1, keepdims=True)
-        moved[below] = particles[below] + heading * np.minimum(1.0, radius / np.maximum(length, 1e-300))
-        why[below] = code
-    return ParticleFit(index, moved, estimate(moved), why, measure, bar)
+    goals = (rng.random((n, dims)) if target is None else np.tile(target, (n, 1))) * scale
+    goals = _assign(particles, goals)
+    radii = np.minimum(radius, np.linalg.norm(goals - particles, axis=-1))
+    ball = _ball(rng, particles, goals, radii, reached, candidates, scale)
+    estimates = estimate(ball.reshape(-1, dims)).reshape(n, candidates)
+    allowed = estimates >= bar
+    to_goal = np.where(allowed, np.linalg.norm(ball - goals[:, None, :], axis=-1), np.inf)
+    choice = np.where(allowed.any(axis=1), np.argmin(to_goal, axis=1), np.argmax(estimates, axis=1))
+    every = np.arange(n)
+    why = np.where(allowed.any(axis=1), TOWARD_TARGET, TO_BEST) + 2 * replaced
+    return ParticleFit(
+        index,
+        ball[every, choice] / scale,
+        estimates[every, choice],
+        why.astype(np.int64),
+        inputs.measure,
+        inputs.bar,
+        threshold_reached,
+    )
 
 
 class CurrotTeacher(Teacher):
-    """Task particles moved toward a target by constrained optimal transport (see the module docstring)."""
+    """Task particles moved toward a target by constrained optimal transport, kept where the student
+    is estimated to reach the bar: a success rate of ``success_delta`` while results carry
+    ``success``, else a return of ``delta``, or without it ``success_delta`` of the way through the
+    returns seen (see the module docstring)."""
 
     kind = "currot"
     Params = CurrotParams
@@ -268,12 +448,25 @@ class CurrotTeacher(Teacher):
             easiest = self._anchor("start", space.easiest)
             start = np.clip(easiest + self.params.start_spread * ndtri(start + 2.0**-54), 0.0, 1.0)
         self._particles = start
+        widths = np.where(space.high > space.low, space.high - space.low, 1.0)
+        self._scale = widths if self.params.distances == "raw" else np.ones(dims)
         self._fit: ParticleFit | None = None
-        self._log = RowLog(dims + 2, 2 * self.params.buffer_size)
+        self._log = RowLog(dims + 2, 2 * self.params.update_every)
         self.fits_requested = 0
         self.fits_installed = 0
-        self._starting_points: dict[int, np.ndarray] = {}
+        self._pending: dict[int, FitInputs] = {}
         self._moves: deque[dict[str, Any]] = deque(maxlen=RECENT_MOVES)
+        # The lasting state the authors' buffer keeps, updated as each fit falls due.
+        self._successes = np.empty((0, dims + 2))
+        """The success buffer: unit task, reward, success (``UNKNOWN_SUCCESS`` when not reported)."""
+        self._failures = np.empty((0, dims + 2))
+        self._buffer_reached = False
+        self._threshold_reached = False
+        self._floor: list[float] | None = None
+        """The lowest reward and success of the first update's results."""
+        self._every_success = True
+        """Whether every result so far reported ``success``."""
+        self._returns = ReturnScale()
 
     def _anchor(self, name: str, anchor: Callable[[], Task]) -> np.ndarray:
         try:
@@ -284,8 +477,12 @@ class CurrotTeacher(Teacher):
 
     @property
     def radius(self) -> float:
-        """The longest move in unit coordinates: ``max_move`` times the unit box's diagonal."""
-        return self.params.max_move * math.sqrt(len(self.space))
+        """The longest move: ``max_move`` times the diagonal of the box (in ``distances`` units)."""
+        return self.params.max_move * float(np.linalg.norm(self._scale))
+
+    @property
+    def failures_kept(self) -> int:
+        return self.params.particles if self.params.buffer_size is None else self.params.buffer_size
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         dims, particles = len(self.space), self._particles
@@ -294,47 +491,91 @@ class CurrotTeacher(Teacher):
         units = np.clip(particles[picked] + self.params.noise * (2.0 * uniforms[:, 1:] - 1.0), 0.0, 1.0)
         return [self.space.from_array(row) for row in self.space.from_unit(units)]
 
+    def _bar(self) -> tuple[str, float | None]:
+        """The measure and the bar an update falling due now holds the estimate to."""
+        if self._every_success:
+            return "success", self.params.success_delta
+        if self.params.delta is not None:
+            return "return", self.params.delta
+        seen = self._returns.range()
+        return "return", None if seen is None else seen[0] + self.params.success_delta * (seen[1] - seen[0])
+
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         success = UNKNOWN_SUCCESS if result.success is None else float(result.success)
         unit = self.space.to_unit(self.space.to_array(result.task))
         self._log.append(np.concatenate([unit, (result.reward, success)]))
+        self._returns.see(result.reward)
+        self._every_success &= result.success is not None
         if self.results_seen % self.params.update_every:
             return None
         self.fits_requested += 1
         index = self.fits_requested - 1
-        self._starting_points[index] = self._particles
-        for stale in sorted(self._starting_points)[:-MAX_PENDING_FITS]:
-            del self._starting_points[stale]
-        self._log.needed_from = self._window_start(min(self._starting_points))
+        self._pending[index] = self._fall_due(index, self._log.view(self.results_seen - self.params.update_every))
+        for stale in sorted(self._pending)[:-MAX_PENDING_FITS]:
+            del self._pending[stale]
+        self._log.needed_from = self.results_seen
         return self.refit_job(index)
 
-    def _window_start(self, index: int) -> int:
-        """The first of the results that update ``index`` sees."""
-        return max(0, (index + 1) * self.params.update_every - self.params.buffer_size)
+    def _fall_due(self, index: int, batch: np.ndarray) -> FitInputs:
+        """Take the batch since the last update into the success buffer and the kept failures (the
+        authors' bookkeeping, cheap and sequential), and fix what update ``index`` starts from."""
+        measure, bar = self._bar()
+        column = -1 if measure == "success" else -2
+        if self._floor is None:
+            self._floor = [float(batch[:, -2].min()), float(batch[:, -1].min())]
+        dims = len(self.space)
+
+        def scored(rows: np.ndarray) -> np.ndarray:
+            """Rows with their performance under this update's measure appended."""
+            return np.concatenate([rows, rows[:, column, None]], axis=1)
+
+        successes, failed, self._buffer_reached = update_successes(
+            scored(self._successes),
+            scored(batch),
+            dims,
+            math.inf if bar is None else bar,
+            self._buffer_reached,
+            self.params.particles,
+            functools.partial(self._target_samples, index),
+            self._scale,
+        )
+        self._successes = successes[:, :-1]
+        if self._threshold_reached:
+            self._failures = np.concatenate([self._failures, batch[failed]])[-self.failures_kept :]
+        keep = [*range(dims), dims + 2 + column]
+        return FitInputs(
+            self._particles,
+            self._successes[:, keep],
+            self._failures[:, keep],
+            measure,
+            bar,
+            self._floor[1 if measure == "success" else 0],
+            self._buffer_reached,
+            self._threshold_reached,
+        )
+
+    def _target_samples(self, index: int) -> np.ndarray:
+        count, dims = self.params.particles, len(self.space)
+        if self._target is not None:
+            return np.tile(self._target, (count, 1))
+        return np.random.default_rng([indexed_seed(self.seed, FIT_STREAM, index), 1]).random((count, dims))
 
     def refit_job(self, index: int) -> FitJob:
-        """Update ``index`` starts from the particles installed when it fell due (kept until a
-        later update is installed) and sees the ``buffer_size`` results before it."""
+        """Update ``index`` starts from the inputs fixed when it fell due (kept until a later update
+        is installed or ``MAX_PENDING_FITS`` later ones fall due)."""
         if not 0 <= index < self.fits_requested:
             raise ValueError(f"fit {index} has not fallen due ({self.fits_requested} have)")
-        if index not in self._starting_points:
+        if index not in self._pending:
             raise ValueError(f"fit {index} was superseded: a later fit is installed or due")
-        window = self._log.view(self._window_start(index), (index + 1) * self.params.update_every)
-        if np.all(window[:, -1] != UNKNOWN_SUCCESS):
-            measure, performance, bar = "success", window[:, -1].copy(), self.params.success_delta
-        else:
-            measure, performance, bar = "return", window[:, -2].copy(), self.params.delta
         run = functools.partial(
             move_particles,
             index,
-            self._starting_points[index],
-            window[:, :-2].copy(),
-            performance,
-            measure,
-            bar,
+            self._pending[index],
             self.radius,
             self.params.candidates,
             self._target,
+            self._scale,
+            self.params.below_bar == "walk",
             indexed_seed(self.seed, FIT_STREAM, index),
         )
         return FitJob(index=index, run=run)
@@ -344,28 +585,31 @@ class CurrotTeacher(Teacher):
             raise TypeError(f"expected the ParticleFit returned by a FitJob, got {type(fitted).__name__}")
         if self._fit is not None and fitted.index <= self._fit.index:
             raise ValueError(f"fit {fitted.index} is stale: fit {self._fit.index} is installed")
-        before = self._starting_points.get(fitted.index, self._particles)
+        inputs = self._pending.get(fitted.index)
+        before = self._particles if inputs is None else inputs.particles
         self._adopt(fitted)
         reasons = ", ".join(
             f"{int(np.sum(fitted.why == code))} {words}" for code, words in enumerate(WHY) if np.any(fitted.why == code)
         )
+        bar = "none yet" if fitted.bar is None else f"{fitted.bar:g}"
         self._moves.append(
             {
                 "at_results": (fitted.index + 1) * self.params.update_every,
                 "fit": fitted.index,
                 "from": self._mean_task(before),
                 "to": self._mean_task(fitted.particles),
-                "longest_move": float(np.linalg.norm(fitted.particles - before, axis=-1).max()),
-                "why": f"{reasons} (estimated {fitted.measure} bar {fitted.bar:g})",
+                "longest_move": float(np.linalg.norm((fitted.particles - before) * self._scale, axis=-1).max()),
+                "why": f"{reasons} (estimated {fitted.measure} bar {bar})",
             }
         )
 
     def _adopt(self, fitted: ParticleFit) -> None:
         self._fit = fitted
         self._particles = fitted.particles
+        self._threshold_reached = self._threshold_reached or fitted.threshold_reached
         self.fits_installed += 1
-        for done in [index for index in self._starting_points if index <= fitted.index]:
-            del self._starting_points[done]
+        for done in [index for index in self._pending if index <= fitted.index]:
+            del self._pending[done]
 
     def export_fit(self, fitted: ParticleFit) -> dict[str, Any]:
         return {
@@ -375,6 +619,7 @@ class CurrotTeacher(Teacher):
             "why": fitted.why.tolist(),
             "measure": fitted.measure,
             "bar": fitted.bar,
+            "threshold_reached": fitted.threshold_reached,
         }
 
     def import_fit(self, data: Mapping[str, Any]) -> ParticleFit:
@@ -387,7 +632,10 @@ class CurrotTeacher(Teacher):
                 f"a fit of {shape[0]} particles in {shape[1]} dimensions needs particles of shape {shape} and "
                 f"{shape[0]} values and reasons, got {particles.shape}, {values.shape} and {why.shape}"
             )
-        return ParticleFit(int(data["index"]), particles, values, why, str(data["measure"]), float(data["bar"]))
+        bar = None if data["bar"] is None else float(data["bar"])
+        return ParticleFit(
+            int(data["index"]), particles, values, why, str(data["measure"]), bar, bool(data["threshold_reached"])
+        )
 
     def _history_rows(self) -> RowLog:
         """One row per result: its task in unit coordinates, its reward and its success (1, 0, or
@@ -401,20 +649,34 @@ class CurrotTeacher(Teacher):
             "fits_requested": self.fits_requested,
             "fits_installed": self.fits_installed,
             "model": None if self._fit is None else self.export_fit(self._fit),
-            "starting_points": [[index, points.tolist()] for index, points in self._starting_points.items()],
+            "pending": [[index, inputs.export()] for index, inputs in self._pending.items()],
+            "successes": self._successes.tolist(),
+            "failures": self._failures.tolist(),
+            "buffer_reached": self._buffer_reached,
+            "threshold_reached": self._threshold_reached,
+            "floor": self._floor,
+            "every_success": self._every_success,
+            "returns_seen": self._returns.export(),
             "moves": list(self._moves),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        first = int(state.get("history_from", 0))
-        self._log.load(history, first, int(state["history_rows"]))
+        dims = len(self.space)
+        # right after an update no row is needed, and an empty history may come without columns
+        rows = history if history.size else np.empty((0, dims + 2))
+        self._log.load(rows, int(state["history_from"]), int(state["history_rows"]))
         if state["model"] is not None:
             self._adopt(self.import_fit(state["model"]))
         self.fits_requested = int(state["fits_requested"])
         self.fits_installed = int(state["fits_installed"])
-        self._starting_points = {
-            int(index): np.array(points, dtype=np.float64) for index, points in state["starting_points"]
-        }
+        self._pending = {int(index): FitInputs.load(inputs, dims) for index, inputs in state["pending"]}
+        self._successes = np.array(state["successes"], dtype=np.float64).reshape(-1, dims + 2)
+        self._failures = np.array(state["failures"], dtype=np.float64).reshape(-1, dims + 2)
+        self._buffer_reached = bool(state["buffer_reached"])
+        self._threshold_reached = bool(state["threshold_reached"])
+        self._floor = None if state["floor"] is None else [float(value) for value in state["floor"]]
+        self._every_success = bool(state["every_success"])
+        self._returns = ReturnScale(state["returns_seen"])
         self._moves.extend(state["moves"])
 
     def _mean_task(self, particles: np.ndarray) -> Task:
@@ -423,11 +685,22 @@ class CurrotTeacher(Teacher):
     def _describe(self) -> dict[str, Any]:
         fit = self._fit
         every = self.params.update_every
+        measure, bar = self._bar()
         return {
             "particles": [self.space.from_array(row) for row in self.space.from_unit(self._particles)],
             "particle_values": [] if fit is None else fit.values.tolist(),
             "measure": None if fit is None else fit.measure,
             "bar": None if fit is None else fit.bar,
+            "next_bar": {
+                "measure": measure,
+                "bar": bar,
+                "source": "success_delta"
+                if measure == "success"
+                else ("delta" if self.params.delta is not None else "learned from the returns seen"),
+            },
+            "success_buffer": len(self._successes),
+            "failures_kept": len(self._failures),
+            "threshold_reached": self._threshold_reached,
             "target": None if self._target is None else self.space.from_array(self.space.from_unit(self._target)),
             "fits": self.fits_installed,
             "fits_requested": self.fits_requested,
