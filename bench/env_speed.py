@@ -20,13 +20,16 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import multiprocessing
+import json
 import os
 import random
+import subprocess
 import sys
+import tempfile
 import time
 import types
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium
@@ -36,6 +39,7 @@ from common.kuka import ENV_ID, HARD_V1_ENV_ID
 from common.kuka.bullet import native_output_silenced
 from common.kuka.env import make_kuka_env
 
+ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("original", "v0", "v0-reload", "hard-v1")
 
 
@@ -158,12 +162,24 @@ def measure(variant: str, steps: int, seed: int) -> SpeedReport:
         if terminated:
             report.grasps += 1
             report.grasp_s += elapsed
-        needs_reset = terminated or truncated
+        needs_reset = bool(terminated or truncated)
         report.finished += needs_reset
-        report.successes += info["is_success"]
+        report.successes += bool(info["is_success"])
     report.total_s, report.wall_s = time.process_time() - start, time.perf_counter() - wall_start
     env.close()
     return report
+
+
+def measure_in_subprocess(variant: str, steps: int, seed: int, common_root: Path | None, scratch: Path) -> SpeedReport:
+    """``measure`` in a fresh process (the original keeps pybullet's global client), importing ``common`` from
+    ``common_root`` (an exported baseline) when given, else from the working tree."""
+    environment = dict(os.environ)
+    if common_root is not None:
+        environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(common_root), environment.get("PYTHONPATH")]))
+    out = scratch / "report.json"
+    command = [sys.executable, __file__, "--measure", variant, str(out), "--steps", str(steps), "--seed", str(seed)]
+    subprocess.run(command, cwd=ROOT, env=environment, check=True)
+    return SpeedReport(**json.loads(out.read_text()))
 
 
 def main() -> None:
@@ -172,24 +188,49 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the actions and block placements")
     parser.add_argument("--rounds", type=int, default=2, help="turns each variant takes (default 2)")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
+    parser.add_argument(
+        "--baseline", metavar="COMMIT", help="also measure this commit's environment for each variant but the original"
+    )
+    parser.add_argument("--measure", nargs=2, metavar=("VARIANT", "OUT"), help=argparse.SUPPRESS)  # one measurement
     args = parser.parse_args()
     if args.steps < 1 or args.rounds < 1:
         parser.error("--steps and --rounds must be at least 1")
-    reports = {variant: SpeedReport() for variant in args.variants}
-    # One process per measurement: the original's pybullet client is the process's global one.
-    with multiprocessing.get_context("spawn").Pool(1, maxtasksperchild=1) as pool:
+    if args.measure is not None:
+        variant, out = args.measure
+        Path(out).write_text(json.dumps(asdict(measure(variant, args.steps, args.seed))))
+        return
+
+    with tempfile.TemporaryDirectory() as directory:
+        scratch = Path(directory)
+        sides: list[tuple[str, str, Path | None]] = [(variant, variant, None) for variant in args.variants]
+        if args.baseline is not None:
+            exported = scratch / "baseline"
+            exported.mkdir()
+            archive = subprocess.run(
+                ["git", "archive", args.baseline, "common"], cwd=ROOT, capture_output=True, check=True
+            )
+            subprocess.run(["tar", "-x", "-C", str(exported)], input=archive.stdout, check=True)
+            others = [variant for variant in args.variants if variant != "original"]
+            sides += [(f"{variant} at {args.baseline}", variant, exported) for variant in others]
+        reports = {label: SpeedReport() for label, _, _ in sides}
+        load = os.getloadavg()[0]
         for round_index in range(args.rounds):
-            for variant in args.variants:
-                reports[variant].add(pool.apply(measure, (variant, args.steps, args.seed + round_index * 100_000)))
-    print(f"load average {os.getloadavg()[0]:.2f} (1 min) after the runs")
-    for variant, report in reports.items():
-        print("\n".join(report.lines(variant)))
+            for label, variant, common_root in sides:
+                seed = args.seed + round_index * 100_000
+                reports[label].add(measure_in_subprocess(variant, args.steps, seed, common_root, scratch))
+    print(f"load average (1 min) {load:.2f} before the runs, {os.getloadavg()[0]:.2f} after")
+    for label, report in reports.items():
+        print("\n".join(report.lines(label)))
+    ours = [variant for variant in args.variants if variant != "original"]
     if "original" in reports:
         original = reports["original"].rate
-        ratios = ", ".join(
-            f"{variant} {report.rate / original:.2f}x" for variant, report in reports.items() if variant != "original"
+        print(
+            "against the original (CPU-time rates): "
+            + ", ".join(f"{v} {reports[v].rate / original:.2f}x" for v in ours)
         )
-        print(f"against the original (CPU-time rates): {ratios}")
+    if args.baseline is not None:
+        ratios = [f"{v} {reports[v].rate / reports[f'{v} at {args.baseline}'].rate:.2f}x" for v in ours]
+        print(f"against {args.baseline} (CPU-time rates): " + ", ".join(ratios))
 
 
 if __name__ == "__main__":
