@@ -44,7 +44,7 @@ class TuneProgress(Callback):
         self.last_line = ""
 
     def on_trial_start(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
-        self._print(trials)
+        self._print(trials, starting=trial)  # Tune calls this before it marks the trial running
 
     def on_trial_result(
         self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any], **info: Any
@@ -61,9 +61,10 @@ class TuneProgress(Callback):
         print(f"trial {trial.trial_id} failed; its error is in {trial.path}, and trials.json at the end", flush=True)
         self._print(trials)
 
-    def _print(self, trials: list[Any]) -> None:
-        counts = {state: sum(trial.status == state for trial in trials) for state in ("RUNNING", "PENDING", "ERROR")}
-        done = sum(trial.status == "TERMINATED" for trial in trials)
+    def _print(self, trials: list[Any], starting: Any = None) -> None:
+        statuses = ["RUNNING" if trial is starting else trial.status for trial in trials]
+        counts = {state: statuses.count(state) for state in ("RUNNING", "PENDING", "ERROR")}
+        done = statuses.count("TERMINATED")
         best = "none yet" if self.best is None else f"{self.best[0]:.3g} ({self.best[1]} at {self.best[2]:_.0f} steps)"
         line = (
             f"{counts['RUNNING']} running, {counts['PENDING']} pending, {done} finished, {counts['ERROR']} failed "
@@ -183,6 +184,8 @@ def _plot(path: Path, entries: list[dict[str, Any]], metric: str, best: str | No
     axes.set_xlabel("environment steps")
     axes.set_ylabel(f"{metric} on the hardest task (in-run evaluation)")
     axes.set_title("kuka-curriculum tune: every trial" + (f"; best {best}" if best else ""))
+    if metric == "success":
+        axes.set_ylim(-0.02, 1.02)
     axes.grid(alpha=0.3)
     if any(entry["curve"] for entry in entries):
         axes.legend(fontsize="small")
