@@ -94,13 +94,22 @@ def test_the_readme_is_a_short_front_door() -> None:
     assert len(lines) <= README_MOST_LINES, f"README.md has {len(lines)} lines; the reference belongs in docs/"
 
 
+def _code(markdown: str) -> str:
+    """The text of a page's code blocks and inline code spans: what a reader would type."""
+    blocks = re.findall(r"^```[^\n]*\n(.*?)^```", markdown, re.MULTILINE | re.DOTALL)
+    spans = re.findall(r"`([^`\n]+)`", re.sub(r"^```.*?^```", "", markdown, flags=re.MULTILINE | re.DOTALL))
+    return "\n".join(blocks + spans)
+
+
 def test_the_readme_names_only_commands_and_make_targets_that_exist() -> None:
-    readme = README.read_text(encoding="utf-8")
+    code = _code(README.read_text(encoding="utf-8"))
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     targets = set(re.findall(r"^([A-Za-z][\w-]*):", makefile, re.MULTILINE))
-    for target in re.findall(r"\bmake ([a-z][\w-]*)", readme):
+    named = re.findall(r"\bmake ([a-z][\w-]*)", code)
+    assert {"train", "test"} <= set(named), "the README's two commands are `make train` and `make test`"
+    for target in named:
         assert target in targets, f"README.md runs `make {target}`, which the Makefile lacks"
-    for command in re.findall(r"\bkuka-curriculum ([a-z][\w-]*)", readme):
+    for command in re.findall(r"\bkuka-curriculum ([a-z][\w-]*)", code):
         assert command in kuka_curriculum.COMMANDS, f"README.md names `kuka-curriculum {command}`, which does not exist"
 
 
