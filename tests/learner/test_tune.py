@@ -8,6 +8,7 @@ on. The budgets are two batches of 512 steps and episodes end within 150 steps, 
 
 from __future__ import annotations
 
+import argparse
 import json
 import signal
 import subprocess
@@ -225,3 +226,37 @@ def test_a_refused_search_space_stops_the_command_before_anything_trains(tmp_pat
     error = capsys.readouterr().err
     assert "fit_rate: cannot be 100000000" in error and str(space) in error
     assert not out.exists()
+
+
+def test_bakeoff_takes_the_settings_file_and_flags_override_it(tmp_path):
+    from learner import bakeoff
+
+    settings = tmp_path / "best.json"
+    settings.write_text(
+        json.dumps(
+            {
+                "teacher": "alp-gmm",
+                "env": "KukaGraspHard-v1",
+                "workers": 3,
+                "envs_per_worker": 2,
+                "ppo": {"rollout_length": 256, "learning_rate": 2e-4},
+                "teacher_params": {"fit_rate": 100},
+                "tune": {"trial": "x"},
+            }
+        ),
+        encoding="utf-8",
+    )
+    parser = argparse.ArgumentParser()
+    bakeoff.add_arguments(parser)
+    args = parser.parse_args(["--config", str(settings), "--workers", "1", "--ppo", "learning_rate=5e-4"])
+    assert (args.env, args.workers, args.envs_per_worker, args.rollout_length) == ("KukaGraspHard-v1", 1, 2, 256)
+    assert dict(args.ppo) == {"learning_rate": 5e-4}  # the flag's pair comes later and wins
+    assert args.teacher_params == [("alp-gmm.fit_rate", 100)]  # that teacher's only
+
+
+def test_a_settings_file_with_an_unknown_key_is_refused_by_name(tmp_path, capsys):
+    settings = tmp_path / "best.json"
+    settings.write_text(json.dumps({"ppo": {"learning_rate": 1e-4}, "learning_rate": 1e-4}), encoding="utf-8")
+    assert main(["train", "--config", str(settings), "--run-dir", str(tmp_path / "run")]) == 2
+    assert "unknown key(s) learning_rate" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
