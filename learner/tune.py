@@ -212,12 +212,12 @@ def _tune(args: argparse.Namespace) -> int:
     if not args.resume:
         write_json(out / SETTINGS_FILE, asdict(settings))
 
-    from learner.tune_report import write_reports
-
     with contextlib.ExitStack() as stack:
         teacher_url = cli._teacher(args.teacher_url, out, stack)
         public_url = (args.public_url or os.environ.get(cli.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         _connect_ray(args.ray_address, base.workers + 1, stack)
+        from learner.tune_report import write_reports  # imports Ray, so after _connect_ray has chosen its auth mode
+
         print(f"tune directory: {out}")
         print(f"dashboard:      {public_url}/  (every trial's curriculum)")
         setup = TrialSetup(base, teacher_url, out / RUNS_DIR, out.name, token)
@@ -244,6 +244,8 @@ def _check_teacher_params(base: TrainConfig) -> None:
 
 def _connect_ray(address: str | None, cpus_per_trial: int, stack: contextlib.ExitStack) -> None:
     """A local cluster counts at least one trial's CPUs, so one trial always fits and the others queue."""
+    if address is None and "ray" not in sys.modules:
+        os.environ.setdefault(cli.RAY_AUTH_MODE_VARIABLE, "token")  # as `train` does, for the same reason
     import ray
 
     options: dict[str, Any] = {

@@ -215,12 +215,15 @@ def write_reports(out: Path, settings: TuneSettings, space: SearchSpace, elapsed
             "metric": settings.metric,
             "searched": [dimension.key for dimension in space.dimensions],
             "best": best_entry["trial"] if best_entry else None,
-            "seconds": round(elapsed, 1),
+            "seconds_this_invocation": round(elapsed, 1),  # Tune's loop; a resumed tune counts only its own
             "trials": entries,
         },
     )
     _plot(out / CURVES_FILE, entries, settings.metric, best_entry["trial"] if best_entry else None)
-    lines = [f"{len(entries)} trials in {elapsed:.0f} s ({settings.metric} at the hardest task, final evaluation):"]
+    lines = [
+        f"{len(entries)} trials, {elapsed:.0f} s in this invocation ({settings.metric} at the hardest task, "
+        "final evaluation):"
+    ]
     for entry in entries:
         value = f"{entry['final'][settings.metric]:.3g}" if entry["final"] else "-"
         drawn = ", ".join(f"{key}={value!r}" for key, value in entry["config"].items())
