@@ -62,11 +62,18 @@ COPY learner ./learner
 RUN pip install --no-deps --no-build-isolation . \
     && rm -rf build ./*.egg-info
 
-# Run unprivileged. /data (teacher database) and /runs (checkpoints, TensorBoard) exist here
-# already owned by that user, so fresh named volumes mounted on them start out writable.
+# The compose stack's token holders start behind it: it sets KC_TEACHER_TOKEN, from .env or the one it
+# makes on the first start in /secrets (docker-compose.yml).
+COPY docker/with-teacher-token.sh /usr/local/bin/with-teacher-token
+
+# Run unprivileged. /data (teacher database), /runs (checkpoints, TensorBoard) and /secrets (the token,
+# for that user alone) exist here already owned by it, so fresh named volumes mounted on them start out
+# writable.
 RUN useradd --create-home --uid 1000 kuka \
-    && mkdir /data /runs \
-    && chown kuka:kuka /data /runs
+    && mkdir /data /runs /secrets \
+    && chown kuka:kuka /data /runs /secrets \
+    && chmod 0700 /secrets \
+    && chmod 0755 /usr/local/bin/with-teacher-token
 USER kuka
 
 # 8000 teacher API, 6379 Ray GCS, 8265 Ray dashboard, 6006 TensorBoard.

@@ -2,8 +2,9 @@
 
 Nothing is built or started here (``test_docker_stack.py`` builds the image and runs the stack);
 a mistake in a file is named here precisely instead. What is checked: Debian's ``docker-compose
-config`` accepts ``docker-compose.yml`` with ``.env.example`` once its token is filled in, and
-refuses it before; every service's command is a real invocation of the program it runs (our own
+config`` accepts ``docker-compose.yml`` with no ``.env`` and with ``.env.example`` filled in; the
+token holders start behind the script that gives them the stack's own token or the one in ``.env``,
+and nothing else; every service's command is a real invocation of the program it runs (our own
 argparse sub-commands, Ray's click commands, TensorBoard's flags); ports, volumes and environment
 agree with each other and with the teacher's ``Settings``; and the ``Dockerfile`` copies what
 exists and starts the console script.
@@ -42,6 +43,10 @@ TOKEN_HOLDERS = {"teacher", "learner"}
 """The teacher checks the token; the learner writes with it and hands it to its rollout actors."""
 FILLED_IN_TOKEN = "deployment-test-token-0123456789"
 """What a user puts in ``.env`` where ``.env.example`` leaves the token empty."""
+TOKEN_SCRIPT = ROOT / "docker" / "with-teacher-token.sh"
+TOKEN_WRAPPER = "/usr/local/bin/with-teacher-token"
+"""Where the Dockerfile installs ``TOKEN_SCRIPT``."""
+TOKEN_VOLUME_FILE = "/secrets/teacher-token"
 
 
 # --- reading the files --------------------------------------------------------------------------
@@ -106,6 +111,8 @@ def service_commands(service: dict[str, Any]) -> list[list[str]]:
     entrypoint = service.get("entrypoint") or json.loads(dockerfile_values("ENTRYPOINT")[-1])
     command = service.get("command") or json.loads(dockerfile_values("CMD")[-1])
     argv = [*entrypoint, *command]
+    if argv[0] == TOKEN_WRAPPER:  # it sets the token, then runs the rest
+        argv = argv[2:] if argv[1] == "--announce" else argv[1:]
     if argv[:2] != ["/bin/sh", "-c"]:
         return [argv]
     commands = [shlex.split(part) for part in argv[2].split("&&")]
@@ -237,14 +244,76 @@ def test_compose_file_is_valid_and_has_every_role(services: dict[str, dict[str, 
     assert set(services) == SERVICES
 
 
-@pytest.mark.parametrize("env_file", ["no-token.env", ".env.example"])
-def test_compose_refuses_to_run_without_a_teacher_token_and_says_how_to_make_one(tmp_path: Path, env_file: str) -> None:
-    no_token = tmp_path / "no-token.env"
-    no_token.write_text("TEACHER=alp-gmm\n")
-    result = compose_config(no_token if env_file == "no-token.env" else ROOT / env_file)
-    assert result.returncode != 0
-    assert "KC_TEACHER_TOKEN" in result.stderr
-    assert "secrets.token_urlsafe(32)" in result.stderr
+@pytest.mark.parametrize("env_file", ["no .env", ".env.example"])
+def test_compose_starts_without_a_token_and_its_holders_take_the_stacks_own(tmp_path: Path, env_file: str) -> None:
+    """With no token in ``.env``, the config renders, and the teacher and the learner start behind the
+    script that makes or reads the stack's token on the volume they share."""
+    empty = tmp_path / "empty.env"
+    empty.write_text("")
+    services = load_compose(empty if env_file == "no .env" else ROOT / env_file)["services"]
+    wrapped = {name for name, service in services.items() if (service.get("entrypoint") or [""])[0] == TOKEN_WRAPPER}
+    assert wrapped == TOKEN_HOLDERS
+    assert f"{TOKEN_SCRIPT.relative_to(ROOT)} {TOKEN_WRAPPER}" in dockerfile_values("COPY")
+    for name in TOKEN_HOLDERS:
+        assert environment_of(services[name])[LEARNER_TOKEN_VARIABLE] == ""
+        volume, read_only = volume_holding(services[name], TOKEN_VOLUME_FILE)
+        assert volume == "secrets" and not read_only
+    assert services["learner"]["entrypoint"][1] == "--announce", "the learner's log should say how to read it"
+    assert all(TOKEN_VOLUME_FILE not in str(services[name].get("volumes")) for name in SERVICES - TOKEN_HOLDERS)
+
+
+def run_token_script(token_file: Path, *arguments: str, token: str = "") -> subprocess.CompletedProcess[str]:
+    """The script as a container runs it, its token file moved from /secrets to ``token_file``."""
+    environment = {"PATH": os.environ["PATH"], "KC_TEACHER_TOKEN_FILE": str(token_file)}
+    if token:
+        environment[LEARNER_TOKEN_VARIABLE] = token
+    command = ["sh", str(TOKEN_SCRIPT), *arguments, "sh", "-c", f'echo "token=${LEARNER_TOKEN_VARIABLE}"']
+    return subprocess.run(command, env=environment, capture_output=True, text=True, timeout=60, check=False)
+
+
+def test_the_first_start_makes_a_private_random_token_that_later_starts_share(tmp_path: Path) -> None:
+    token_file = tmp_path / "teacher-token"
+    first = run_token_script(token_file)
+    assert first.returncode == 0, first.stderr
+    token = first.stdout.strip().removeprefix("token=")
+    assert len(token) >= 40 and token_file.read_text().strip() == token
+    assert token_file.stat().st_mode & 0o777 == 0o600
+    again = run_token_script(token_file, "--announce")
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.splitlines() == [
+        f"teacher token: made on the stack's first start; read it with: docker compose exec teacher cat {token_file}",
+        f"token={token}",
+    ]
+    other_stack = run_token_script(tmp_path / "other-token")
+    assert other_stack.stdout.strip() != first.stdout.strip(), "every stack must get a token of its own"
+
+
+def test_services_starting_together_agree_on_one_token(tmp_path: Path) -> None:
+    token_file = tmp_path / "teacher-token"
+    environment = {"PATH": os.environ["PATH"], "KC_TEACHER_TOKEN_FILE": str(token_file)}
+    command = ["sh", str(TOKEN_SCRIPT), "sh", "-c", f'echo "${LEARNER_TOKEN_VARIABLE}"']
+    starts = [subprocess.Popen(command, env=environment, stdout=subprocess.PIPE, text=True) for _ in range(8)]
+    tokens = {start.communicate(timeout=60)[0].strip() for start in starts}
+    assert tokens == {token_file.read_text().strip()}
+    assert [path.name for path in tmp_path.iterdir()] == ["teacher-token"], "a draft was left behind"
+
+
+def test_a_token_set_in_env_wins_and_no_token_file_is_made(tmp_path: Path) -> None:
+    token_file = tmp_path / "teacher-token"
+    result = run_token_script(token_file, "--announce", token=FILLED_IN_TOKEN)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == [
+        "teacher token: it is KC_TEACHER_TOKEN in your .env",
+        f"token={FILLED_IN_TOKEN}",
+    ]
+    assert not token_file.exists()
+
+
+def test_without_a_token_the_service_does_not_start(tmp_path: Path) -> None:
+    """A token file that cannot be written (a volume mounted read-only, say) stops the service."""
+    unwritable = tmp_path / "missing-directory" / "teacher-token"
+    result = run_token_script(unwritable)
+    assert result.returncode != 0 and "token=" not in result.stdout
 
 
 def test_teacher_answers_the_host_names_the_stack_uses(services: dict[str, dict[str, Any]]) -> None:

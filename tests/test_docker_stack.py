@@ -2,7 +2,9 @@
 
 The image is built from this checkout, ``docker-compose up`` starts the teacher, a Ray head, two Ray
 worker containers, the learner and TensorBoard, and a short training run goes through it while the
-test kills the teacher's process and, in a second run, a whole worker container.
+test kills the teacher's process and, in a second run, a whole worker container. The first run has
+its token in ``.env``; the second has no ``.env`` at all (its few settings in the shell's environment,
+as ``TOTAL_STEPS=... docker compose up`` gives them), so the stack makes its own token.
 
 What these machines lack is stood in for, as an air-gapped lab would: Docker Hub is unreachable, so
 the base image is a Debian rootfs made with ``debootstrap`` and ``docker import``; the wheels come
@@ -231,11 +233,13 @@ def project_image(docker_env: dict[str, str]) -> str:
 
 
 class Compose:
-    """``docker-compose`` on the project's own compose file, with an env file as ``.env``."""
+    """``docker-compose`` on the project's own compose file, with an env file as ``.env`` (an empty one
+    stands for none) and ``settings`` as the shell's environment."""
 
     def __init__(self, environment: dict[str, str], env_file: Path) -> None:
         self.environment = environment
         self.env_file = env_file
+        self.settings: dict[str, str] = {}
         self.up_at = time.monotonic()
         """When the last ``up`` was started."""
 
@@ -249,7 +253,7 @@ class Compose:
             str(ROOT / "docker-compose.yml"),
         ]
         command = ["docker-compose", *project, "--env-file", str(self.env_file), *arguments]
-        return run(command, self.environment, timeout=timeout)
+        return run(command, {**self.environment, **self.settings}, timeout=timeout)
 
     def containers(self, service: str) -> list[str]:
         return self("ps", "--quiet", service).split()
@@ -271,9 +275,9 @@ class Compose:
         return self.docker("exec", self.container("tensorboard"), "cat", f"/runs/{path}")
 
 
-def write_env_file(path: Path, **values: str | int) -> Path:
+def run_settings(**values: str | int) -> dict[str, str]:
+    """A short run's settings, as a person would put them in ``.env`` or the shell's environment."""
     settings = {
-        "KC_TEACHER_TOKEN": TOKEN,
         "TEACHER": "alp-gmm",
         "ROLLOUT_WORKERS": 2,
         "ENVS_PER_WORKER": 4,
@@ -281,6 +285,11 @@ def write_env_file(path: Path, **values: str | int) -> Path:
         "TRAIN_ARGS": TRAIN_ARGS,
         **values,
     }
+    return {name: str(value) for name, value in settings.items()}
+
+
+def write_env_file(path: Path, **values: str | int) -> Path:
+    settings = run_settings(KC_TEACHER_TOKEN=TOKEN, **values)
     path.write_text("".join(f"{name}={value}\n" for name, value in settings.items()))
     return path
 
@@ -478,20 +487,58 @@ def test_the_learner_carries_on_and_no_episode_result_is_lost(teacher_kill_run: 
     assert received == reported > 0
 
 
-def test_training_completes_when_a_worker_container_is_killed(teacher_kill_run: TeacherKillRun, tmp_path: Path) -> None:
-    """A second run on the same stack (another seed); one of the two worker containers dies mid-run."""
+@dataclass
+class NoEnvRun:
+    """The second run: no ``.env``, so the stack's own token; one of the two worker containers killed."""
+
+    compose: Compose
+    victim: str
+    learner_state: dict[str, Any]
+    learner_log: str
+    token: str
+
+
+@pytest.fixture(scope="module")
+def no_env_run(teacher_kill_run: TeacherKillRun, tmp_path_factory: pytest.TempPathFactory) -> NoEnvRun:
+    """The same stack brought up again with no ``.env`` and another seed: the teacher (whose token
+    changes) and the learner are recreated; the teacher's database and the runs stay on their volumes."""
     compose = teacher_kill_run.compose
-    compose.env_file = write_env_file(tmp_path / "second.env", SEED=1, TOTAL_STEPS=WORKER_RUN_STEPS)
-    compose("up", "--detach", "--no-build", "--scale", "ray-worker=2", "learner", timeout=STACK_READY_S)
+    compose.env_file = tmp_path_factory.mktemp("no-env") / "empty.env"
+    compose.env_file.write_text("")
+    compose.settings = run_settings(SEED=1, TOTAL_STEPS=WORKER_RUN_STEPS)
+    compose("up", "--detach", "--no-build", "--scale", "ray-worker=2", timeout=STACK_READY_S)
     learner = compose.container("learner")
     wait_for(lambda: metrics(compose, "alp-gmm-seed1"), STACK_READY_S, "the second run's first iteration")
     victim = compose.containers("ray-worker")[0]
     compose.docker("kill", victim)
 
     state = wait_for_exit(compose, learner)
-    log = compose.docker("logs", learner)
-    assert (state["ExitCode"], state["RestartCount"]) == (0, 0), log[-3000:]
-    assert compose.state(victim)["Status"] == "exited", "the killed worker container came back"
+    token = compose.docker("exec", compose.container("teacher"), "cat", "/secrets/teacher-token").strip()
+    return NoEnvRun(compose, victim, state, compose.docker("logs", learner), token)
+
+
+def test_training_completes_when_a_worker_container_is_killed(no_env_run: NoEnvRun) -> None:
+    compose = no_env_run.compose
+    state = no_env_run.learner_state
+    assert (state["ExitCode"], state["RestartCount"]) == (0, 0), no_env_run.learner_log[-3000:]
+    assert compose.state(no_env_run.victim)["Status"] == "exited", "the killed worker container came back"
     records = metrics(compose, "alp-gmm-seed1")
     assert records[-1]["step"] >= WORKER_RUN_STEPS
     assert records[-1]["workers/replacements"] >= 1, "no rollout actor was replaced after its container died"
+    last_line = no_env_run.learner_log.strip().splitlines()[-1]
+    assert last_line.startswith("final checkpoint: /runs/alp-gmm-seed1/checkpoints/"), last_line
+
+
+def test_with_no_env_the_stack_makes_a_token_and_the_learner_says_how_to_read_it(no_env_run: NoEnvRun) -> None:
+    log = no_env_run.learner_log
+    hint = "teacher token: made on the stack's first start; read it with: docker compose exec teacher cat "
+    assert f"{hint}/secrets/teacher-token" in log, log[:3000]
+    assert f"dashboard:     {TEACHER_URL}/curricula/alp-gmm-seed1" in log
+    assert len(no_env_run.token) >= 40 and no_env_run.token != TOKEN
+
+    tasks = f"{TEACHER_URL}{API_PREFIX}/curricula/alp-gmm-seed1/tasks"
+    assert httpx.post(tasks, json={"count": 1}, timeout=10).status_code == 401
+    old = httpx.post(tasks, json={"count": 1}, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=10)
+    assert old.status_code == 401, "the .env token of the first run should no longer be accepted"
+    made = httpx.post(tasks, json={"count": 1}, headers={"Authorization": f"Bearer {no_env_run.token}"}, timeout=10)
+    assert made.status_code == 200
