@@ -167,20 +167,26 @@ def compare_with_baseline(args: argparse.Namespace, family: list[str], scratch: 
     print(f"train {' '.join(family)} --workers {args.workers} --total-steps {args.total_steps:_} --seed {args.seed}")
     for loop in args.loops:
         load = os.getloadavg()[0]
-        runs = {
-            name: timed_train(
-                loop, args.workers, args.total_steps, args.seed, scratch / f"{name}-{loop}", None, family, root
-            )
-            for name, root in ((args.baseline, baseline), ("working tree", ROOT))
-        }
+        runs: dict[str, list[TrainRun]] = {args.baseline: [], "working tree": []}
+        for repeat in range(args.repeats):  # the sides take turns, so a load that drifts slows both alike
+            for name, root in ((args.baseline, baseline), ("working tree", ROOT)):
+                run_dir = scratch / f"{name}-{loop}-{repeat}"
+                runs[name].append(
+                    timed_train(loop, args.workers, args.total_steps, args.seed, run_dir, None, family, root)
+                )
         print(f"--loop {loop} (load average {load:.2f} before the runs, {os.getloadavg()[0]:.2f} after)")
         rates = {}
-        for name, run in runs.items():
-            rates[name] = (run.steps / run.command_seconds, run.steps / run.loop_seconds)
+        for name, timed in runs.items():
+            steps = sum(run.steps for run in timed)
+            rates[name] = (
+                steps / sum(run.command_seconds for run in timed),
+                steps / sum(run.loop_seconds for run in timed),
+            )
             whole, loop_rate = rates[name]
+            each = ", ".join(f"{run.steps / run.command_seconds:,.0f}" for run in timed)
             print(
-                f"  {name:14} whole command {whole:7,.0f} steps/s ({run.command_seconds:.1f} s), "
-                f"training loop {loop_rate:7,.0f} steps/s; episodes of {run.mean_episode_length:.0f} steps"
+                f"  {name:14} whole command {whole:7,.0f} steps/s (each run: {each}), "
+                f"training loop {loop_rate:7,.0f} steps/s; episodes of {timed[0].mean_episode_length:.0f} steps"
             )
         before, after = rates.values()
         print(f"  ratio          whole command {after[0] / before[0]:.2f}, training loop {after[1] / before[1]:.2f}")
@@ -201,6 +207,7 @@ def main() -> None:
     parser.add_argument("--env", choices=ENV_IDS, default=ENV_IDS[0], help="train's task family")
     parser.add_argument("--teacher", default="alp-gmm", help="train's teacher (fixed: the family's hardest task)")
     parser.add_argument("--baseline", metavar="COMMIT", help="time this commit's train against the working tree's")
+    parser.add_argument("--repeats", type=int, default=1, help="with --baseline: runs of each side, in turns")
     args = parser.parse_args()
     family = ["--env", args.env, "--teacher", args.teacher]
     if args.baseline is not None:
