@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 from common.kuka import ENV_ID, ENV_IDS
+from common.policy.noise import LOG_STD_BOUNDS
 
 if TYPE_CHECKING:
     from common.client.schemas import TeacherKind
@@ -19,6 +20,11 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class PPOConfig:
+    """PPO's hyperparameters. Finished episodes per update are about batch / episode length (5 at the
+    default 4,096 steps and ~800-step grasps): ``TrainConfig.envs_per_worker`` raises them without
+    longer rollouts, and ``update_epochs`` x batch / ``minibatch_size`` is how many Adam steps reuse
+    them (80 by default)."""
+
     rollout_length: int = 512
     """Steps each environment collects per iteration; batch = workers x envs per worker x this."""
     gamma: float = 0.999
@@ -28,7 +34,9 @@ class PPOConfig:
     learning_rate: float = 3e-4
     """Adam step size at the start of the run."""
     anneal_lr: bool = True
-    """Decay the learning rate linearly to zero over the step budget."""
+    """Decay the learning rate linearly over the step budget, to ``lr_final_fraction`` of it."""
+    lr_final_fraction: float = 0.0
+    """Where annealing ends, as a share of ``learning_rate``; 0 stops learning at the end of the budget."""
     adam_eps: float = 1e-5
     """Adam epsilon; larger than torch's default for stability, as in the PPO reference code."""
     update_epochs: int = 10
@@ -53,6 +61,10 @@ class PPOConfig:
     """Hidden layer widths of the actor and of the critic (separate tanh MLPs)."""
     init_log_std: float = -0.5
     """Initial log standard deviation of the Gaussian policy (actions live in [-1, 1])."""
+    state_dependent_std: bool = False
+    """The actor outputs the log-std per state (clamped to [-5, 1]), so it can be quiet where precision matters."""
+    min_log_std: float | None = None
+    """Floor of the log-std (None = none); -2.3 keeps std >= 0.1 on actions in [-1, 1]."""
     angle_features: bool = True
     """Feed observed angles to the networks as (sin, cos): the gripper's roll wraps at +-pi every few steps."""
     obs_clip: float = 10.0
@@ -65,6 +77,11 @@ class PPOConfig:
         _require(0.0 <= self.gamma <= 1.0, "gamma must be in [0, 1]")
         _require(0.0 <= self.gae_lambda <= 1.0, "gae_lambda must be in [0, 1]")
         _require(self.learning_rate > 0, "learning_rate must be positive")
+        _require(0.0 <= self.lr_final_fraction <= 1.0, "lr_final_fraction must be in [0, 1]")
+        _require(
+            self.min_log_std is None or LOG_STD_BOUNDS[0] <= self.min_log_std <= self.init_log_std,
+            f"min_log_std must be None or in [{LOG_STD_BOUNDS[0]}, init_log_std]",
+        )
         _require(self.update_epochs >= 1, "update_epochs must be at least 1")
         _require(self.minibatch_size >= 1, "minibatch_size must be at least 1")
         _require(self.clip_coef > 0, "clip_coef must be positive")
@@ -88,14 +105,18 @@ class PPOConfig:
                 fits = isinstance(value, bool)
             elif isinstance(current, int):
                 fits = isinstance(value, int) and not isinstance(value, bool)
-            else:  # floats, and target_kl's float-or-None
-                fits = (value is None and name == "target_kl") or (
+            else:  # floats, and the float-or-None ones
+                fits = (value is None and name in _OPTIONAL_FLOATS) or (
                     isinstance(value, (int, float)) and not isinstance(value, bool)
                 )
             _require(fits, f"PPO hyperparameter {name} cannot be {value!r}")
-            checked[name] = float(value) if isinstance(current, float) and value is not None else value
+            is_float = isinstance(current, float) or name in _OPTIONAL_FLOATS
+            checked[name] = float(value) if is_float and value is not None else value
         return replace(self, **checked)
 
+
+_OPTIONAL_FLOATS = ("target_kl", "min_log_std")
+"""``PPOConfig`` fields that take a number or None."""
 
 TEACHERS: tuple[TeacherKind, ...] = (
     "alp-gmm",

@@ -18,6 +18,8 @@ def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
             action_dim=probe.action_space.shape[0],
             hidden_sizes=ppo.hidden_sizes,
             init_log_std=ppo.init_log_std,
+            state_dependent_std=ppo.state_dependent_std,
+            min_log_std=ppo.min_log_std,
             angle_indices=probe.angle_indices if ppo.angle_features else (),
         )
     finally:

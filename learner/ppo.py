@@ -39,6 +39,15 @@ def compute_advantages(batch: TrajectoryBatch, gamma: float, gae_lambda: float) 
     return advantages, advantages + batch.values
 
 
+def annealed_learning_rate(config: PPOConfig, progress: float) -> float:
+    """The step size after ``progress`` (share of the budget spent, in [0, 1]): with ``anneal_lr``, a
+    straight line from ``learning_rate`` down to ``lr_final_fraction`` of it at the end of the budget."""
+    if not config.anneal_lr:
+        return config.learning_rate
+    spent = min(max(progress, 0.0), 1.0)
+    return config.learning_rate * (1.0 - spent * (1.0 - config.lr_final_fraction))
+
+
 class PPOLosses(NamedTuple):
     """One minibatch's losses: ``total`` is what the optimiser minimises, the rest are its parts and
     diagnostics (the statistics ``PPOLearner.update`` averages into its metrics)."""
@@ -125,7 +134,7 @@ class PPOLearner:
                 f"at most {max_policy_lag} behind accepted"
             )
         cfg = self.config
-        learning_rate = cfg.learning_rate * (1.0 - min(max(progress, 0.0), 1.0)) if cfg.anneal_lr else cfg.learning_rate
+        learning_rate = annealed_learning_rate(cfg, progress)
         for group in self.optimizer.param_groups:
             group["lr"] = learning_rate
 
@@ -162,6 +171,7 @@ class PPOLearner:
                 losses.total.backward()  # type: ignore[no-untyped-call]  # torch leaves Tensor.backward unannotated
                 nn.utils.clip_grad_norm_(self.network.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
+                self.network.floor_log_std()
 
                 for name in stats:
                     stats[name].append(getattr(losses, name).detach())
@@ -173,7 +183,8 @@ class PPOLearner:
         metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
         metrics["learning_rate"] = learning_rate
         metrics["explained_variance"] = _explained_variance(old_values.numpy(), returns.numpy())
-        metrics["action_std"] = float(self.network.actor_log_std.exp().mean().item())
+        with torch.no_grad():
+            metrics["action_std"] = float(self.network.mean_and_log_std(observations)[1].exp().mean().item())
         return metrics
 
     def state_dict(self) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 """The actor-critic network and the snapshot that carries it from the learner to the workers.
 
-A Gaussian policy with a state-independent log standard deviation; actions are sampled unbounded
+A Gaussian policy whose log standard deviation is one learned number per action dimension, or, with
+``PolicySpec.state_dependent_std``, a second output of the actor's head; actions are sampled unbounded
 and clipped to the action box by whoever steps the environment, so log-probabilities stay exact.
 Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store): the
 network's layers as read from its modules, in order. They run it through ``InferencePolicy``, which
@@ -18,6 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from common.policy.noise import LOG_STD_BOUNDS
 from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState, RunningNormalizer
 
 
@@ -31,8 +33,15 @@ class PolicySpec:
     init_log_std: float = -0.5
     angle_indices: tuple[int, ...] = ()
     """Observation entries that are angles in [-pi, pi]; the networks see each as (sin, cos)."""
+    state_dependent_std: bool = False
+    """The actor's head outputs the log-std per state (clamped to ``LOG_STD_BOUNDS``) beside the mean."""
+    min_log_std: float | None = None
+    """Floor of the log-std (None = none beyond ``LOG_STD_BOUNDS`` for a state-dependent one)."""
 
     def __post_init__(self) -> None:
+        if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
+            low, high = LOG_STD_BOUNDS
+            raise ValueError(f"min_log_std must be in [{low}, {high}), got {self.min_log_std}")
         if len(set(self.angle_indices)) != len(self.angle_indices) or not all(
             0 <= index < self.obs_dim for index in self.angle_indices
         ):
@@ -44,6 +53,12 @@ class PolicySpec:
     def feature_dim(self) -> int:
         """Width of the networks' input: every angle becomes two features."""
         return self.obs_dim + len(self.angle_indices)
+
+    @property
+    def log_std_range(self) -> tuple[float, float]:
+        """Where a state-dependent log-std is clamped: ``LOG_STD_BOUNDS``, raised to ``min_log_std``."""
+        low, high = LOG_STD_BOUNDS
+        return (low if self.min_log_std is None else max(low, self.min_log_std)), high
 
 
 class ObservationFeatures:
@@ -85,15 +100,41 @@ def _mlp(sizes: list[int], output_gain: float) -> nn.Sequential:
 
 
 class ActorCritic(nn.Module):
-    """Separate tanh MLPs for the action mean and the value (sharing hurts PPO on control tasks)."""
+    """Separate tanh MLPs for the action mean and the value (sharing hurts PPO on control tasks).
+
+    With a state-dependent std the actor's head has twice the outputs, the mean's then the log-std's;
+    the latter start at ``init_log_std`` in every state (zero bias offset, near-zero weights), and
+    ``actor_log_std`` does not exist.
+    """
 
     def __init__(self, spec: PolicySpec) -> None:
         super().__init__()
         self.spec = spec
         hidden = list(spec.hidden_sizes)
-        self.actor_mean = _mlp([spec.feature_dim, *hidden, spec.action_dim], output_gain=0.01)
+        outputs = 2 * spec.action_dim if spec.state_dependent_std else spec.action_dim
+        self.actor_mean = _mlp([spec.feature_dim, *hidden, outputs], output_gain=0.01)
         self.critic = _mlp([spec.feature_dim, *hidden, 1], output_gain=1.0)
-        self.actor_log_std = nn.Parameter(torch.full((spec.action_dim,), float(spec.init_log_std)))
+        if spec.state_dependent_std:
+            last = self.actor_mean[-1]
+            assert isinstance(last, nn.Linear)
+            nn.init.constant_(last.bias[spec.action_dim :], spec.init_log_std)
+        else:
+            self.actor_log_std = nn.Parameter(torch.full((spec.action_dim,), float(spec.init_log_std)))
+
+    def mean_and_log_std(self, observations: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Action means (n, action_dim) and log-stds: (n, action_dim) per state, or (action_dim,) shared."""
+        output: torch.Tensor = self.actor_mean(observations)
+        if not self.spec.state_dependent_std:
+            return output, self.actor_log_std
+        low, high = self.spec.log_std_range
+        return output[:, : self.spec.action_dim], output[:, self.spec.action_dim :].clamp(low, high)
+
+    def floor_log_std(self) -> None:
+        """Project a shared log-std back onto ``min_log_std`` after an optimiser step. A clamp in the
+        forward pass would cut its gradient, and one pushed under the floor could never come back."""
+        if not self.spec.state_dependent_std and self.spec.min_log_std is not None:
+            with torch.no_grad():
+                self.actor_log_std.clamp_(min=self.spec.min_log_std)
 
     def value(self, observations: torch.Tensor) -> torch.Tensor:
         values: torch.Tensor = self.critic(observations)
@@ -103,13 +144,13 @@ class ActorCritic(nn.Module):
         self, observations: torch.Tensor, actions: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Return (log-probability, entropy, value) of given actions, with gradients."""
-        mean = self.actor_mean(observations)
-        entropy = (0.5 + _LOG_SQRT_2PI + self.actor_log_std).sum().expand(mean.shape[0])
-        return self._log_prob(mean, actions), entropy, self.value(observations)
+        mean, log_std = self.mean_and_log_std(observations)
+        entropy = (0.5 + _LOG_SQRT_2PI + log_std).sum(-1).expand(mean.shape[0])
+        return self._log_prob(mean, log_std, actions), entropy, self.value(observations)
 
-    def _log_prob(self, mean: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    @staticmethod
+    def _log_prob(mean: torch.Tensor, log_std: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Diagonal Gaussian log-density, summed over action dimensions."""
-        log_std = self.actor_log_std
         return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - _LOG_SQRT_2PI).sum(-1)
 
 
@@ -171,10 +212,11 @@ class PolicySnapshot:
 
     spec: PolicySpec
     actor: tuple[DenseLayer, ...]
-    """The action mean's head."""
+    """The action mean's head (and the log-std's, its second half of outputs, where that is per state)."""
     critic: tuple[DenseLayer, ...]
     """The value's head."""
-    log_std: np.ndarray
+    log_std: np.ndarray | None
+    """The shared log-std; None where the actor's head outputs it per state."""
     normalizer: NormalizerState
     obs_clip: float
     version: int
@@ -185,7 +227,7 @@ class PolicySnapshot:
             network.spec,
             dense_layers(network.actor_mean),
             dense_layers(network.critic),
-            _numpy(network.actor_log_std),
+            None if network.spec.state_dependent_std else _numpy(network.actor_log_std),
             normalizer.state(),
             normalizer.clip,
             version,
@@ -221,9 +263,10 @@ class InferencePolicy:
         fused = _fuse(snapshot.actor, snapshot.critic)
         heads = [fused] if fused is not None else [snapshot.actor, snapshot.critic]
         self._heads = [[_stage(layer) for layer in head] for head in heads]
-        log_std = snapshot.log_std.astype(np.float64)
-        self._std = np.exp(log_std).astype(np.float32)
-        self._log_density_offset = float((log_std + _LOG_SQRT_2PI).sum())
+        if snapshot.log_std is not None:
+            log_std = snapshot.log_std.astype(np.float64)
+            self._std = np.exp(log_std).astype(np.float32)
+            self._log_density_offset = float((log_std + _LOG_SQRT_2PI).sum())
         stats = snapshot.normalizer
         self._obs_mean = np.asarray(stats.mean, dtype=np.float64)
         self._obs_inverse_scale = 1.0 / np.sqrt(np.asarray(stats.var, dtype=np.float64) + NORMALIZER_EPSILON)
@@ -231,21 +274,28 @@ class InferencePolicy:
         self.version = snapshot.version
 
     def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Action means (n, action_dim) and values (n,)."""
+        """The actor head's outputs (n, action_dim, or twice that with a state-dependent std) and values (n,)."""
         scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
         inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
         if len(self._heads) == 1:
             output = _run(self._heads[0], inputs)
-            return output[:, : self.spec.action_dim], output[:, self.spec.action_dim]
+            return output[:, :-1], output[:, -1]
         actor, critic = self._heads
         return _run(actor, inputs), _run(critic, inputs)[:, 0]
 
     def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
-        mean, values = self._forward(observations)
+        actor, values = self._forward(observations)
+        mean = actor[:, : self.spec.action_dim]
         noise = np.zeros_like(mean) if deterministic else self.rng.standard_normal(mean.shape, dtype=np.float32)
-        log_probs = (-0.5 * (noise * noise).sum(axis=-1) - self._log_density_offset).astype(np.float32)
-        return mean + self._std * noise, log_probs, values
+        if self.spec.state_dependent_std:
+            log_std = np.clip(actor[:, self.spec.action_dim :], *self.spec.log_std_range)
+            std = np.exp(log_std)
+            offset = (log_std + np.float32(_LOG_SQRT_2PI)).sum(axis=-1)
+        else:
+            std, offset = self._std, self._log_density_offset
+        log_probs = (-0.5 * (noise * noise).sum(axis=-1) - offset).astype(np.float32)
+        return mean + std * noise, log_probs, values
 
     def value(self, observations: np.ndarray) -> np.ndarray:
         return self._forward(observations)[1]

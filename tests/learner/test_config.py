@@ -18,6 +18,22 @@ def test_a_config_saved_before_angle_features_existed_loads_as_trained_on_raw_an
     assert TrainConfig().ppo.angle_features is True
 
 
+def test_a_config_saved_before_the_student_options_existed_loads_as_trained():
+    saved = TrainConfig().to_dict()
+    for name in ("lr_final_fraction", "state_dependent_std", "min_log_std"):
+        del saved["ppo"][name]
+    assert TrainConfig.from_dict(saved).ppo == PPOConfig()
+    assert (PPOConfig().lr_final_fraction, PPOConfig().state_dependent_std, PPOConfig().min_log_std) == (0, False, None)
+
+
+def test_the_log_std_floor_takes_a_number_or_none_as_an_override():
+    assert PPOConfig().with_overrides({"min_log_std": -2}).min_log_std == -2.0
+    assert isinstance(PPOConfig().with_overrides({"min_log_std": -2}).min_log_std, float)
+    assert PPOConfig(min_log_std=-2.0).with_overrides({"min_log_std": None}).min_log_std is None
+    with pytest.raises(ValueError, match="cannot be"):
+        PPOConfig().with_overrides({"min_log_std": "low"})
+
+
 def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_books_environment():
     saved = TrainConfig(env="KukaGraspHard-v0").to_dict()
     assert TrainConfig.from_dict(saved).env == "KukaGraspHard-v0"
@@ -35,6 +51,10 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
         (lambda: PPOConfig(gamma=1.5), "gamma"),
         (lambda: PPOConfig(minibatch_size=0), "minibatch_size"),
         (lambda: PPOConfig(hidden_sizes=()), "hidden_sizes"),
+        (lambda: PPOConfig(lr_final_fraction=1.5), "lr_final_fraction"),
+        (lambda: PPOConfig(lr_final_fraction=-0.1), "lr_final_fraction"),
+        (lambda: PPOConfig(min_log_std=-0.4), "min_log_std"),  # above the initial -0.5
+        (lambda: PPOConfig(min_log_std=-6.0), "min_log_std"),  # under the state-dependent clamp
     ],
 )
 def test_bad_settings_are_refused_with_the_setting_named(make, message):

@@ -226,3 +226,50 @@ def test_learning_rate_stays_fixed_without_annealing():
     for progress in (0.0, 0.5, 0.99):
         metrics = learner.update([fixed_batch(learner, log_ratio=0.1)], progress=progress)
         assert metrics["learning_rate"] == learner.optimizer.param_groups[0]["lr"] == 0.01
+
+
+@pytest.mark.parametrize(
+    ("progress", "share"),
+    [(0.0, 1.0), (0.5, 1.0 - 0.5 * 0.75), (1.0, 0.25), (1.5, 0.25)],
+    ids=["start", "half", "end-of-budget", "past-the-budget"],
+)
+def test_learning_rate_anneals_to_its_final_fraction_and_stays_there(progress, share):
+    lr = 0.01
+    config = PPOConfig(minibatch_size=16, update_epochs=1, learning_rate=lr, lr_final_fraction=0.25, adam_eps=1e-12)
+    learner = PPOLearner(SPEC, config, seed=0)
+    before = [parameter.detach().clone() for parameter in learner.network.parameters()]
+    metrics = learner.update([fixed_batch(learner, log_ratio=0.1)], progress=progress)
+
+    assert metrics["learning_rate"] == pytest.approx(lr * share)
+    moved = max(
+        (after.detach() - start).abs().max().item()
+        for after, start in zip(learner.network.parameters(), before, strict=True)
+    )
+    assert moved == pytest.approx(lr * share, rel=1e-3, abs=1e-9)
+
+
+@pytest.mark.parametrize(("floor", "after"), [(None, -3.0), (-2.0, -2.0)], ids=["no-floor", "floor"])
+def test_a_shared_log_std_pushed_under_its_floor_is_put_back_on_it(floor, after):
+    """An update projects the log-std onto ``min_log_std``; with a learning rate of 1e-9 nothing else moves it."""
+    spec = PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(4,), min_log_std=floor)
+    config = PPOConfig(minibatch_size=16, update_epochs=1, learning_rate=1e-9, anneal_lr=False, min_log_std=floor)
+    learner = PPOLearner(spec, config, seed=0)
+    with torch.no_grad():
+        learner.network.actor_log_std.fill_(-3.0)
+    metrics = learner.update([fixed_batch(learner, log_ratio=0.1)])
+
+    assert learner.network.actor_log_std.item() == pytest.approx(after, abs=1e-6)
+    assert metrics["action_std"] == pytest.approx(math.exp(after), rel=1e-5)
+
+
+def test_an_update_trains_a_state_dependent_std_through_the_log_std_outputs():
+    spec = PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(4,), state_dependent_std=True)
+    config = PPOConfig(minibatch_size=16, update_epochs=2, learning_rate=0.01, state_dependent_std=True)
+    learner = PPOLearner(spec, config, seed=0)
+    last = learner.network.actor_mean[-1]
+    weights, bias = last.weight.detach().clone(), last.bias.detach().clone()
+    metrics = learner.update([fixed_batch(learner, log_ratio=0.1)])
+
+    # The second output row is the log-std's: the policy loss reaches it.
+    assert not torch.equal(last.weight[1], weights[1]) and not torch.equal(last.bias[1], bias[1])
+    assert 0.5 < metrics["action_std"] / math.exp(spec.init_log_std) < 1.5

@@ -55,7 +55,7 @@ def assert_matches_the_network(network: ActorCritic, normalizer: RunningNormaliz
     assert actions.shape == (9, spec.action_dim) and values.shape == (9,)
     assert log_probs == pytest.approx(expected_log_probs.detach().numpy(), abs=1e-4)
     assert values == pytest.approx(expected_values.detach().numpy(), abs=1e-4)
-    assert deterministic == pytest.approx(network.actor_mean(inputs).detach().numpy(), abs=1e-4)
+    assert deterministic == pytest.approx(network.mean_and_log_std(inputs)[0].detach().numpy(), abs=1e-4)
 
 
 def perturbed(network: ActorCritic) -> ActorCritic:
@@ -177,3 +177,65 @@ def test_an_angle_either_side_of_the_wrap_gives_nearly_the_same_features():
 def test_angle_indices_must_name_distinct_observation_entries(angles):
     with pytest.raises(ValueError, match="angle_indices"):
         PolicySpec(obs_dim=5, action_dim=1, angle_indices=angles)
+
+
+def test_a_state_dependent_std_starts_at_its_initial_value_then_varies_with_the_state():
+    torch.manual_seed(4)
+    spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 8), init_log_std=-0.7, state_dependent_std=True)
+    network = ActorCritic(spec)
+    inputs = torch.randn(16, spec.feature_dim)
+    _, log_std = network.mean_and_log_std(inputs)
+    assert log_std.shape == (16, 2)
+    assert log_std.detach().numpy() == pytest.approx(-0.7, abs=0.05)
+    assert "actor_log_std" not in dict(network.named_parameters())
+
+    perturbed(network)
+    _, log_std = network.mean_and_log_std(inputs)
+    assert log_std.std(dim=0).min().item() > 0.05  # each dimension's noise differs from state to state
+    log_probs, entropy, _ = network.evaluate(inputs, torch.zeros(16, 2))
+    assert entropy.detach().numpy() == pytest.approx((0.5 + 0.5 * np.log(2 * np.pi) + log_std).sum(-1).detach())
+    log_probs.sum().backward()
+    log_std_rows = network.actor_mean[-1].weight.grad[spec.action_dim :]
+    assert log_std_rows.abs().min().item() > 0  # the log-probability's gradient reaches the log-std outputs
+
+
+@pytest.mark.parametrize("fusable", [True, False], ids=["fused", "separate-heads"])
+def test_inference_follows_a_state_dependent_std(fusable):
+    torch.manual_seed(5)
+    spec = PolicySpec(obs_dim=6, action_dim=3, hidden_sizes=(8, 8), angle_indices=(2,), state_dependent_std=True)
+    network = ActorCritic(spec)
+    if not fusable:
+        network.critic.insert(1, nn.Tanh())
+    network, normalizer = perturbed(network), fitted_normalizer(spec)
+    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    assert snapshot.log_std is None
+    assert_matches_the_network(network, normalizer, snapshot)
+
+
+@pytest.mark.parametrize(
+    ("bias", "min_log_std", "expected"),
+    [(10.0, None, 1.0), (-10.0, None, -5.0), (-10.0, -2.0, -2.0)],
+    ids=["ceiling", "floor", "min-log-std"],
+)
+def test_a_state_dependent_log_std_is_clamped_in_training_and_inference_alike(bias, min_log_std, expected):
+    torch.manual_seed(6)
+    spec = PolicySpec(obs_dim=4, action_dim=2, hidden_sizes=(8,), state_dependent_std=True, min_log_std=min_log_std)
+    network = ActorCritic(spec)
+    with torch.no_grad():
+        network.actor_mean[-1].bias[spec.action_dim :] = bias
+    normalizer = fitted_normalizer(spec)
+    observations = np.random.default_rng(3).normal(50.0, 4.0, size=(5, 4)).astype(np.float32)
+    inputs = torch.from_numpy(normalizer.normalize(observations))
+    assert network.mean_and_log_std(inputs)[1].detach().numpy() == pytest.approx(expected)
+
+    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0), seed=1)
+    actions, _, _ = policy.act(observations)
+    mean, _, _ = policy.act(observations, deterministic=True)
+    spread = np.random.default_rng(1).standard_normal(actions.shape, dtype=np.float32) * np.exp(expected)
+    assert actions - mean == pytest.approx(spread, rel=1e-4, abs=1e-5)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+
+def test_a_log_std_floor_outside_the_clamp_is_refused():
+    with pytest.raises(ValueError, match="min_log_std"):
+        PolicySpec(obs_dim=4, action_dim=2, min_log_std=-6.0)
