@@ -7,16 +7,32 @@ the space's limit) with the other parameters uniform in the box; otherwise it is
 box. Every result whose task lies on a boundary is queued for that boundary (exact equality, as
 the tasks handed out carry the bound's exact value; a parameter whose bounds still coincide puts
 every result on both). When a queue holds ``queue_length`` results, their mean performance
-(``performance.py``: success rate, or the return scaled by ``reward_range``) at or above
+(``performance.py``: success rate, or the return placed in ``reward_range``; without one, between
+the lowest and highest returns seen so far, so the defaults work on any scale) at or above
 ``upper_threshold`` moves that bound ``step`` of the parameter's width outward, at or below
-``lower_threshold`` moves it back inward; then the queue is emptied.
+``lower_threshold`` moves it back inward; then the queue is emptied. A queue holds the raw results
+and is judged with the range as it stands when it is full.
 
-Differences from TeachMyAgent's ADR (Romac et al. 2021), whose benchmark settings (boundary
-probability 0.7, step 0.1 of the width, queues of 10) are the defaults here: thresholds are on
-the [0, 1] performance scale rather than raw return; a pinned boundary is chosen uniformly among
-the open ones rather than a parameter first and then one of its ends; and a bound never narrows
-past the starting box (TeachMyAgent lets it move until it meets the opposite bound), so the box
-always holds the easiest task.
+Checked against its sources for issue 48: OpenAI et al. 2019 (Algorithm 1: pin one parameter at
+one of its bounds, record the performance in that bound's buffer, and when the buffer holds m
+results move the bound by a fixed step outward at or above t_H, inward at or below t_L, then clear
+it) and TeachMyAgent's ``ADR`` (Romac et al. 2021, teachers/algos/adr.py). The update rule is theirs;
+nothing was found that needed fixing. Where ours differs, and why:
+
+- like TeachMyAgent, a result feeds every bound its task lies on, not only the one it was pinned to
+  (the paper's rule); with continuous parameters that matters only while a parameter's bounds
+  coincide, where it fills both of its queues at once, as in TeachMyAgent;
+- the pinned boundary is drawn uniformly among the open ones; TeachMyAgent and the paper draw a
+  parameter and then a side, and TeachMyAgent pins nothing when the drawn parameter is at both
+  limits. From the easiest corner (every parameter at a limit) the two agree;
+- a bound never narrows past the starting box (TeachMyAgent lets it move until it meets the
+  opposite bound, the paper states no limit), so the box always holds the easiest task;
+- the step is a share of the parameter's range and the thresholds are on the [0, 1] performance
+  scale (TeachMyAgent: a step in the parameter's units and thresholds on the raw return, optionally
+  rescaled; the paper: a step per parameter and thresholds on a success count).
+
+TeachMyAgent's benchmark settings (boundary probability 0.7, step 0.1 of the width, queues of 10)
+are the defaults (its class's own default boundary probability is 0.5).
 
 When it helps: when the easiest task is known and difficulty grows outward from it along each
 parameter, so that mastering the edge of what is mastered is the way forward. It is slow where
