@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.task_hardness import scripted_action
 from common.kuka import ENV_ID, HARD_V1_ENV_ID
 from common.kuka.env import make_kuka_env
+from common.kuka.scripted import scripted_action
 from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_V1_TASK_SPACE
 
 HARDEST_V1 = KUKA_HARD_V1_TASK_SPACE.hardest()
