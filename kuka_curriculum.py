@@ -68,6 +68,12 @@ def _tune() -> CommandModule:
     return tune
 
 
+def _control() -> CommandModule:
+    from learner import control
+
+    return control
+
+
 COMMANDS: dict[str, Command] = {
     "demo": Command("Write a short GIF of the KUKA grasp environment under random actions.", _demo),
     "train": Command("Train the PPO policy with distributed rollouts and a curriculum teacher.", _train),
@@ -78,6 +84,7 @@ COMMANDS: dict[str, Command] = {
         "Train and evaluate every teacher over several seeds; write a results table and curves.", _bakeoff
     ),
     "tune": Command("Search hyperparameters with Ray Tune, every trial a curriculum on one teacher service.", _tune),
+    "control": Command("Drive the grasp environment by hand with sliders in pybullet's window.", _control),
 }
 
 

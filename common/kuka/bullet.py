@@ -54,4 +54,18 @@ def direct_client() -> BulletClient:
         return BulletClient(connection_mode=pybullet.DIRECT)
 
 
-__all__ = ["BulletClient", "direct_client", "native_output_silenced", "pybullet"]
+def gui_client() -> BulletClient:
+    """A physics client that opens pybullet's window (needs a display; one per process). The window's
+    own camera previews are switched off: they show nothing until a camera image is asked for."""
+    with native_output_silenced():
+        client = BulletClient(connection_mode=pybullet.GUI)
+    for preview in (
+        pybullet.COV_ENABLE_RGB_BUFFER_PREVIEW,
+        pybullet.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
+        pybullet.COV_ENABLE_SEGMENTATION_MARK_PREVIEW,
+    ):
+        client.configureDebugVisualizer(preview, 0)
+    return client
+
+
+__all__ = ["BulletClient", "direct_client", "gui_client", "native_output_silenced", "pybullet"]

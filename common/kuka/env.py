@@ -33,7 +33,7 @@ from gymnasium import spaces
 from common.client.task_space import Task, TaskSpace
 from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
-from common.kuka.bullet import direct_client, pybullet
+from common.kuka.bullet import direct_client, gui_client, pybullet
 from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 
 TIME_STEP = 1.0 / 240.0
@@ -123,9 +123,14 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         render_width: int = 320,
         render_height: int = 240,
         reload_on_reset: bool = False,
+        window: bool = False,
     ) -> None:
         """``reload_on_reset`` rebuilds the scene from the model files at every reset, as the
-        original environment did; it is slower and exists to check the snapshot restore."""
+        original environment did; it is slower and exists to check the snapshot restore.
+
+        ``window`` opens pybullet's window on the scene, which draws every step (it needs a display;
+        one per process): to watch or drive the arm by hand (``common.kuka.manual_control``). It is not
+        a render mode, so that tools which try every declared mode (gymnasium's checker) open none."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             modes = self.metadata["render_modes"]
             raise ValueError(f"render_mode must be one of {modes} or None, got {render_mode!r}")
@@ -138,13 +143,14 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self.render_width = render_width
         self.render_height = render_height
         self.reload_on_reset = reload_on_reset
+        self.window = window
         self._task: Task = self.task_space.validate(task) if task is not None else self.task_space.hardest()
 
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         bound = np.array([WORLD_BOUND] * 3 + [math.pi] * 3 + [WORLD_BOUND] * 2 + [math.pi], dtype=np.float32)
         self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
 
-        self._client = client = direct_client()
+        self._client = client = gui_client() if window else direct_client()
         # Bound once: BulletClient builds a new partial on every attribute access.
         self._step_simulation = client.stepSimulation
         self._closest_points = client.getClosestPoints
@@ -305,13 +311,13 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def _grasp(self, can_count: bool) -> None:
         """The original's scripted grasp: close the fingers while creeping up, then lift.
 
-        Where the reward ignores the gripper's final pose (no distance shaping) and nobody films it, the
+        Where the reward ignores the gripper's final pose (no distance shaping) and nobody films or watches it, the
         grasp stops as soon as its outcome is decided: a touchdown off square cannot count, and fingers
         that closed without touching the block lift nothing. The step's success flag and reward are then
         those of the full grasp, up to ~1,100 physics steps sooner; only its final observation differs (the
         gripper has not risen), which PPO never uses: a terminated episode bootstraps from zero.
         """
-        decide_early = self.render_mode is None and self._distance_weight() == 0.0
+        decide_early = self.render_mode is None and not self.window and self._distance_weight() == 0.0
         if decide_early and not can_count:
             return
         arm, step_simulation = self._arm, self._step_simulation
