@@ -125,13 +125,16 @@ _ADAPTER: TypeAdapter[CurriculumRequest] = TypeAdapter(CurriculumRequest)
 
 def stored_spec(text: str) -> TypedSpec:
     """A spec read back from the store. One stored by an older version with a value outside
-    today's bounds keeps that value (with a warning): refusing it would lose the curriculum."""
+    today's bounds keeps that value (with a warning): refusing it would lose the curriculum.
+    Raises ``ValueError`` for a teacher kind this version lacks (see ``registry``)."""
     try:
         spec: TypedSpec = _ADAPTER.validate_json(text)
         return spec
     except ValidationError as error:
         data: dict[str, Any] = json.loads(text)
-        spec_class = SPEC_CLASSES[data["teacher"]]
+        spec_class = SPEC_CLASSES.get(data.get("teacher", ""))
+        if spec_class is None:
+            raise ValueError(f"teacher kind {data.get('teacher')!r} is not in this version") from None
         log.warning("stored curriculum spec is outside today's parameter bounds, kept as it is: %s", error)
         params_class = spec_class.model_fields["params"].annotation
         assert isinstance(params_class, type) and issubclass(params_class, TeacherParams)

@@ -11,6 +11,14 @@ is ever run again. A fit that was due but never recorded (the process died first
 once, through the fit process, as it would have live. The first start on a database without
 snapshots (schema version 1) replays everything and runs the fits whose models were never stored;
 the curriculum then stores a snapshot, as after every start that replayed anything.
+
+A snapshot stored by another version may not restore into today's teacher (its kind's state
+format changed). ``replay`` then raises ``SnapshotUnusable`` and the caller rebuilds the
+curriculum with ``from_start``: a fresh teacher learns every stored result again, from the first,
+as the schema-1 start does. A stored fit model that today's teacher cannot read is treated like
+one never stored: the fit runs again at the point it was installed, and its new model replaces
+the stored one; fits that failed live stay failed. The snapshot stored after that rebuild holds
+the whole history, and replaces the old history rows.
 """
 
 from __future__ import annotations
@@ -29,6 +37,10 @@ from teacher_service.store import AwaitedTask, Store, StoredFit, StoredResult, S
 from teacher_service.teachers import EpisodeResult, FitJob, Teacher
 
 log = logging.getLogger(__name__)
+
+
+class SnapshotUnusable(Exception):
+    """The stored snapshot cannot restore today's teacher; replay the curriculum ``from_start``."""
 
 
 @dataclass(frozen=True)
@@ -52,8 +64,8 @@ class Replayed:
     lost_fits: list[FitJob]
     """Fits that fell due and were never recorded: they run once the service has started."""
     rerun_fits: list[StoredFit]
-    """Fits stored without a model (by a version-1 service) and run again here, with their
-    models (or errors) now; they are to be stored again."""
+    """Fits stored without a model (by a version-1 service), or with one this version cannot read,
+    and run again here, with their models (or errors) now; they are to be stored again."""
     recent_fits: list[StoredFit]
     """The last fits for the API's fit history, oldest first, with the errors of the fits run again."""
     fits_completed: int
@@ -70,16 +82,22 @@ def replay(
     task_window: int,
     fit_history: int,
     recent_results: int,
+    from_start: bool = False,
 ) -> Replayed:
     """Rebuild ``teacher`` (fresh, as ``make_teacher`` built it) from the curriculum's newest
-    snapshot and the results stored after it (see the module docstring); before the service starts."""
-    stored = store.snapshot(curriculum_id)
+    snapshot and the results stored after it, or from every stored result with ``from_start``
+    (see the module docstring); before the service starts. Raises ``SnapshotUnusable`` when the
+    snapshot does not restore; ``teacher`` is then spoilt."""
+    stored = None if from_start else store.snapshot(curriculum_id)
     after_seq = tasks_issued = issued_index_end = history_stored = 0
     waiting: list[int] = []
     awaited_then: list[int] = []
     if stored is not None:
-        kept_from = teacher.history_kept_from(stored.teacher)
-        teacher.restore(stored.teacher, store.history(curriculum_id, stored.history_rows, kept_from))
+        try:
+            kept_from = teacher.history_kept_from(stored.teacher)
+            teacher.restore(stored.teacher, store.history(curriculum_id, stored.history_rows, kept_from))
+        except Exception as error:
+            raise SnapshotUnusable(f"{type(error).__name__}: {error}") from error
         after_seq, tasks_issued, issued_index_end = stored.last_seq, stored.tasks_issued, stored.issued_index_end
         waiting, history_stored = stored.fits_waiting, stored.history_rows
         teacher.release_history(history_stored)
@@ -144,13 +162,25 @@ def replay(
 
 def _install_stored(name: str, teacher: Teacher, job: FitJob, fit: StoredFit, rerun_fits: list[StoredFit]) -> None:
     """Install a recorded fit from its stored model; one stored without a model (by a version-1
-    service) runs again here, and joins ``rerun_fits`` with its model, to be stored for next time."""
+    service), or with one today's teacher cannot read, runs again here, and joins ``rerun_fits``
+    with its model, to be stored for next time."""
     if fit.error is not None:
         return
     try:
         if fit.model is not None:
-            teacher.install(teacher.import_fit(json.loads(fit.model)))
-            return
+            try:
+                fitted = teacher.import_fit(json.loads(fit.model))
+            except Exception as unreadable:
+                log.warning(
+                    "curriculum %r: stored fit %d's model does not load in this version (%s: %s); running it again",
+                    name,
+                    fit.index,
+                    type(unreadable).__name__,
+                    unreadable,
+                )
+            else:
+                teacher.install(fitted)
+                return
         outcome = _rerun(job, fit)
         error = outcome.error
         if error is None:

@@ -124,6 +124,8 @@ _PUT_HISTORY_CHUNK = (
     "INSERT OR REPLACE INTO history_chunks (curriculum_id, first_row, row_count, width, data) VALUES (?, ?, ?, ?, ?)"
 )
 
+_DELETE_HISTORY = "DELETE FROM history_chunks WHERE curriculum_id = ?"
+
 _Statements = list[tuple[str, list[tuple[Any, ...]]]]
 """SQL statements, each with the rows to run it on (``executemany``)."""
 
@@ -244,7 +246,9 @@ class StoredSnapshot:
 
 def _snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> _Statements:
     """The write that stores ``snapshot``: it replaces the curriculum's previous one, and appends the
-    new history rows, atomically, so the chunks always end where the stored snapshot does."""
+    new history rows, atomically, so the chunks always end where the stored snapshot does. A
+    snapshot whose rows start at row 0 holds the whole history (a first one, or one after a
+    rebuild from the first result): it replaces every stored chunk."""
     rows = np.ascontiguousarray(snapshot.history, dtype="<f8")
     width = rows.shape[1] if rows.ndim == 2 else 0
     chunks = [
@@ -264,7 +268,8 @@ def _snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> _Stat
         json.dumps(snapshot.teacher),
         snapshot.taken_at,
     )
-    return [(_PUT_HISTORY_CHUNK, chunks), (_PUT_SNAPSHOT, [row])]
+    replaced = [(_DELETE_HISTORY, [(curriculum_id,)])] if snapshot.history_from == 0 else []
+    return [*replaced, (_PUT_HISTORY_CHUNK, chunks), (_PUT_SNAPSHOT, [row])]
 
 
 _SELECT_RESULTS = (

@@ -16,7 +16,7 @@ from common.client.schemas import CURRICULUM_NAME_PATTERN
 from teacher_service.core.config import Settings
 from teacher_service.curricula import Curriculum, UnknownCurriculum
 from teacher_service.metrics import ServiceMetrics
-from teacher_service.registry import CurriculumRegistry
+from teacher_service.registry import CurriculumRegistry, CurriculumUnloadable
 
 
 async def get_registry(request: Request) -> CurriculumRegistry:
@@ -44,6 +44,8 @@ async def get_curriculum(name: CurriculumName, request: Request) -> Curriculum:
         return registry.get(name)
     except UnknownCurriculum:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no curriculum named {name!r}") from None
+    except CurriculumUnloadable as unloadable:
+        raise HTTPException(status.HTTP_409_CONFLICT, str(unloadable)) from None
 
 
 CurriculumDep = Annotated[Curriculum, Depends(get_curriculum)]

@@ -27,6 +27,10 @@ router = APIRouter(prefix=f"{API_PREFIX}/curricula", tags=["curricula"])
 
 _NOT_FOUND: dict[int | str, dict[str, Any]] = {
     404: {"model": ErrorMessage, "description": "No curriculum has this name."},
+    409: {
+        "model": ErrorMessage,
+        "description": "A curriculum of this name is stored, but this version could not load it; the detail says why.",
+    },
 }
 _WRITE: dict[int | str, dict[str, Any]] = {
     400: {"model": ErrorMessage, "description": "The body could not be read as JSON text (e.g. it is not UTF-8)."},
