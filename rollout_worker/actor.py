@@ -2,7 +2,9 @@
 
 Every episode's task comes from the teacher service and its result goes straight back there; the
 learner only ever receives fixed-size batches. Weights arrive as a ``PolicySnapshot``; passing a
-``ray.put`` reference lets Ray fetch it from the object store once per worker.
+``ray.put`` reference lets Ray fetch it from the object store once per worker. Nothing here imports
+torch (the policy runs in numpy, ``common.policy.inference``): loading it was most of a worker's
+start-up time.
 """
 
 from __future__ import annotations
@@ -11,14 +13,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import ray
-import torch
 from pydantic import SecretStr
 
 from common.client.task_space import Task
 from common.client.teacher_client import Assignment, TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.env import KukaGraspEnv, make_kuka_env
-from common.policy.actor_critic import InferencePolicy, PolicySnapshot
+from common.policy.inference import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.sampler import Sampler, run_episodes
 
@@ -63,7 +64,6 @@ class RolloutWorker:
     """One CPU's worth of environments; every call runs on the weights it is handed."""
 
     def __init__(self, settings: WorkerSettings, seed: int) -> None:
-        torch.set_num_threads(1)
         self.settings = settings
         self.seed = seed
         self.client = TeacherClient(

@@ -19,7 +19,7 @@ from ray.exceptions import RayActorError
 from ray.util import get_current_placement_group
 
 from common.client.task_space import Task
-from common.policy.actor_critic import PolicySnapshot
+from common.policy.inference import PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.actor import RolloutWorker, WorkerSettings
 

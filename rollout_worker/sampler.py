@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from common.client.task_space import Task
-from common.policy.actor_critic import InferencePolicy
+from common.policy.inference import InferencePolicy
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 
 

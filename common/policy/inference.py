@@ -1,0 +1,229 @@
+"""The policy as the rollout workers run it: its shape, its snapshot and numpy inference, without torch.
+
+A worker process imports only this side of the policy (``actor_critic`` holds the torch network the
+learner trains), so a worker starts without loading torch: at start-up that import is most of a
+worker's time before its first step. ``PolicySnapshot.capture`` reads a network's layers on the
+learner's side and is the one function here that needs torch, which it imports when called.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from common.policy.noise import LOG_STD_BOUNDS
+from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState
+
+if TYPE_CHECKING:
+    from common.policy.actor_critic import ActorCritic
+    from common.policy.normalizer import RunningNormalizer
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """Everything needed to rebuild the network's shape on another process."""
+
+    obs_dim: int
+    action_dim: int
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    init_log_std: float = -0.5
+    angle_indices: tuple[int, ...] = ()
+    """Observation entries that are angles in [-pi, pi]; the networks see each as (sin, cos)."""
+    state_dependent_std: bool = False
+    """The actor's head outputs the log-std per state (clamped to ``LOG_STD_BOUNDS``) beside the mean."""
+    min_log_std: float | None = None
+    """Floor of the log-std (None = none beyond ``LOG_STD_BOUNDS`` for a state-dependent one)."""
+
+    def __post_init__(self) -> None:
+        if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
+            low, high = LOG_STD_BOUNDS
+            raise ValueError(f"min_log_std must be in [{low}, {high}), got {self.min_log_std}")
+        if len(set(self.angle_indices)) != len(self.angle_indices) or not all(
+            0 <= index < self.obs_dim for index in self.angle_indices
+        ):
+            raise ValueError(
+                f"angle_indices must be distinct observation indices below {self.obs_dim}, got {self.angle_indices}"
+            )
+
+    @property
+    def feature_dim(self) -> int:
+        """Width of the networks' input: every angle becomes two features."""
+        return self.obs_dim + len(self.angle_indices)
+
+    @property
+    def log_std_range(self) -> tuple[float, float]:
+        """Where a state-dependent log-std is clamped: ``LOG_STD_BOUNDS``, raised to ``min_log_std``."""
+        low, high = LOG_STD_BOUNDS
+        return (low if self.min_log_std is None else max(low, self.min_log_std)), high
+
+
+class ObservationFeatures:
+    """Raw observations to network inputs: angles as (sin, cos), everything else unchanged.
+
+    An angle near +-pi (the gripper's roll, pointing down, flips sign from one step to the next)
+    is a jump of 2 pi to a network fed the raw number, and a normaliser turns it into noise of
+    unit size; on the circle it is no jump at all.
+    """
+
+    def __init__(self, spec: PolicySpec) -> None:
+        angles = set(spec.angle_indices)
+        self._plain = [index for index in range(spec.obs_dim) if index not in angles]
+        self._angles = list(spec.angle_indices)
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        if not self._angles:
+            return observations
+        angles = observations[..., self._angles]
+        return np.concatenate([observations[..., self._plain], np.sin(angles), np.cos(angles)], axis=-1)
+
+
+LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+@dataclass(frozen=True)
+class DenseLayer:
+    """One ``nn.Linear`` of a network head as numpy, with the activations the head applies after it."""
+
+    weight: np.ndarray
+    """(out_features, in_features), as torch stores it."""
+    bias: np.ndarray
+    activations: tuple[Callable[[np.ndarray], np.ndarray], ...]
+
+
+@dataclass(frozen=True)
+class PolicySnapshot:
+    """The layers and normaliser statistics of one policy version, as plain numpy."""
+
+    spec: PolicySpec
+    actor: tuple[DenseLayer, ...]
+    """The action mean's head (and the log-std's, its second half of outputs, where that is per state)."""
+    critic: tuple[DenseLayer, ...]
+    """The value's head."""
+    log_std: np.ndarray | None
+    """The shared log-std; None where the actor's head outputs it per state."""
+    normalizer: NormalizerState
+    obs_clip: float
+    version: int
+
+    @classmethod
+    def capture(cls, network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
+        """The network's current layers (the learner's side: this is the one place here that needs torch)."""
+        from common.policy.actor_critic import dense_layers, numpy_copy
+
+        return cls(
+            network.spec,
+            dense_layers(network.actor_mean),
+            dense_layers(network.critic),
+            None if network.spec.state_dependent_std else numpy_copy(network.actor_log_std),
+            normalizer.state(),
+            normalizer.clip,
+            version,
+        )
+
+
+_Stage = tuple[np.ndarray, np.ndarray, tuple[Callable[[np.ndarray], np.ndarray], ...]]
+"""A ``DenseLayer`` ready to run: weight as (in, out) float32, so the layer is one ``x @ w + b``."""
+
+
+class InferencePolicy:
+    """Numpy-in, numpy-out policy for stepping environments; no gradients, no torch.
+
+    At the batch sizes of environment stepping (a handful of observations), per-operation overhead,
+    not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
+    layers run as numpy; when the actor and critic heads have the same shape of layers they are
+    fused into one block-diagonal stack when loaded (half the operations), and the observation
+    normaliser's scale is precomputed. The layers are those ``PolicySnapshot.capture`` read from the
+    network's modules, so a change to ``ActorCritic``'s heads needs no change here;
+    ``ActorCritic.evaluate`` is the reference these numbers must match.
+    """
+
+    def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
+        self.spec = snapshot.spec
+        self._features = ObservationFeatures(self.spec)
+        self.rng = np.random.default_rng(seed)
+        self.version = -1
+        self.load(snapshot)
+
+    def load(self, snapshot: PolicySnapshot) -> None:
+        if snapshot.spec != self.spec:
+            raise ValueError(f"snapshot is for {snapshot.spec}, this policy is {self.spec}")
+        fused = _fuse(snapshot.actor, snapshot.critic)
+        heads = [fused] if fused is not None else [snapshot.actor, snapshot.critic]
+        self._heads = [[_stage(layer) for layer in head] for head in heads]
+        if snapshot.log_std is not None:
+            log_std = snapshot.log_std.astype(np.float64)
+            self._std = np.exp(log_std).astype(np.float32)
+            self._log_density_offset = float((log_std + LOG_SQRT_2PI).sum())
+        stats = snapshot.normalizer
+        self._obs_mean = np.asarray(stats.mean, dtype=np.float64)
+        self._obs_inverse_scale = 1.0 / np.sqrt(np.asarray(stats.var, dtype=np.float64) + NORMALIZER_EPSILON)
+        self._obs_clip = snapshot.obs_clip
+        self.version = snapshot.version
+
+    def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The actor head's outputs (n, action_dim, or twice that with a state-dependent std) and values (n,)."""
+        scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
+        inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
+        if len(self._heads) == 1:
+            output = _run(self._heads[0], inputs)
+            return output[:, :-1], output[:, -1]
+        actor, critic = self._heads
+        return _run(actor, inputs), _run(critic, inputs)[:, 0]
+
+    def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
+        actor, values = self._forward(observations)
+        mean = actor[:, : self.spec.action_dim]
+        noise = np.zeros_like(mean) if deterministic else self.rng.standard_normal(mean.shape, dtype=np.float32)
+        if self.spec.state_dependent_std:
+            log_std = np.clip(actor[:, self.spec.action_dim :], *self.spec.log_std_range)
+            std = np.exp(log_std)
+            offset = (log_std + np.float32(LOG_SQRT_2PI)).sum(axis=-1)
+        else:
+            std, offset = self._std, self._log_density_offset
+        log_probs = (-0.5 * (noise * noise).sum(axis=-1) - offset).astype(np.float32)
+        return mean + std * noise, log_probs, values
+
+    def value(self, observations: np.ndarray) -> np.ndarray:
+        return self._forward(observations)[1]
+
+
+def _fuse(actor: tuple[DenseLayer, ...], critic: tuple[DenseLayer, ...]) -> tuple[DenseLayer, ...] | None:
+    """One stack computing both heads side by side (actor outputs first), or None where their layers
+    differ in number or activations. Both heads read the same input, so the first layers stack
+    their rows; later ones are block-diagonal, each half reading its own head's features."""
+    if len(actor) != len(critic) or any(a.activations != c.activations for a, c in zip(actor, critic, strict=True)):
+        return None
+    first = DenseLayer(
+        np.concatenate([actor[0].weight, critic[0].weight]),
+        np.concatenate([actor[0].bias, critic[0].bias]),
+        actor[0].activations,
+    )
+    later = (
+        DenseLayer(_block_diagonal(a.weight, c.weight), np.concatenate([a.bias, c.bias]), a.activations)
+        for a, c in zip(actor[1:], critic[1:], strict=True)
+    )
+    return (first, *later)
+
+
+def _stage(layer: DenseLayer) -> _Stage:
+    return np.ascontiguousarray(layer.weight.T, dtype=np.float32), layer.bias.astype(np.float32), layer.activations
+
+
+def _run(stages: list[_Stage], hidden: np.ndarray) -> np.ndarray:
+    for weight, bias, activations in stages:
+        hidden = hidden @ weight + bias
+        for activation in activations:
+            hidden = activation(hidden)
+    return hidden
+
+
+def _block_diagonal(upper: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    joined = np.zeros((upper.shape[0] + lower.shape[0], upper.shape[1] + lower.shape[1]), dtype=upper.dtype)
+    joined[: upper.shape[0], : upper.shape[1]] = upper
+    joined[upper.shape[0] :, upper.shape[1] :] = lower
+    return joined
