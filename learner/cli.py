@@ -203,7 +203,7 @@ def _train(args: argparse.Namespace) -> int:
         name = curriculum_name(run_dir)
         _register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
-        _connect_ray(args.ray_address, config.workers, stack)
+        connect_ray(args.ray_address, config.workers, stack)
         return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
 
 
@@ -269,7 +269,9 @@ def _check_reachable(ray_address: str) -> None:
         ) from None
 
 
-def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack) -> None:
+def connect_ray(address: str | None, min_cpus: int, stack: contextlib.ExitStack) -> None:
+    """Join the cluster at ``address``, or start a local one counting at least ``min_cpus`` CPUs (so the
+    job's actors always fit), with Ray's token authentication chosen before Ray is first imported."""
     import logging
 
     if address is None and "ray" not in sys.modules:
@@ -279,7 +281,7 @@ def _connect_ray(address: str | None, workers: int, stack: contextlib.ExitStack)
     options: dict[str, Any] = {"log_to_driver": False, "logging_level": logging.WARNING, "namespace": RAY_NAMESPACE}
     try:
         if address is None:
-            ray.init(num_cpus=max(workers, os.cpu_count() or 1), include_dashboard=False, **options)
+            ray.init(num_cpus=max(min_cpus, os.cpu_count() or 1), include_dashboard=False, **options)
         else:
             ray.init(address=address, **options)
     except (ConnectionError, RuntimeError, ValueError) as error:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import logging
 import os
 import sys
 import time
@@ -215,8 +214,9 @@ def _tune(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         teacher_url = cli._teacher(args.teacher_url, out, stack)
         public_url = (args.public_url or os.environ.get(cli.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
-        _connect_ray(args.ray_address, base.workers + 1, stack)
-        from learner.tune_report import write_reports  # imports Ray, so after _connect_ray has chosen its auth mode
+        # A local cluster counts at least one trial's CPUs, so one trial always fits and the others queue.
+        cli.connect_ray(args.ray_address, base.workers + 1, stack)
+        from learner.tune_report import write_reports  # imports Ray, so after connect_ray has chosen its auth mode
 
         print(f"tune directory: {out}")
         print(f"dashboard:      {public_url}/  (every trial's curriculum)")
@@ -240,27 +240,6 @@ def _check_teacher_params(base: TrainConfig) -> None:
         TEACHER_KINDS[base.teacher].Params.parse(base.teacher_params)
     except ValueError as error:
         raise UsageError(f"--teacher-param for {base.teacher}: {error}") from None
-
-
-def _connect_ray(address: str | None, cpus_per_trial: int, stack: contextlib.ExitStack) -> None:
-    """A local cluster counts at least one trial's CPUs, so one trial always fits and the others queue."""
-    if address is None and "ray" not in sys.modules:
-        os.environ.setdefault(cli.RAY_AUTH_MODE_VARIABLE, "token")  # as `train` does, for the same reason
-    import ray
-
-    options: dict[str, Any] = {
-        "log_to_driver": False,
-        "logging_level": logging.WARNING,
-        "namespace": cli.RAY_NAMESPACE,
-    }
-    try:
-        if address is None:
-            ray.init(num_cpus=max(cpus_per_trial, os.cpu_count() or 1), include_dashboard=False, **options)
-        else:
-            ray.init(address=address, **options)
-    except (ConnectionError, RuntimeError, ValueError) as error:
-        raise UsageError(f"cannot connect to Ray at {address or 'a new local cluster'}: {error}") from None
-    stack.callback(ray.shutdown)
 
 
 @dataclass(frozen=True)
