@@ -2,7 +2,8 @@
 
 The command trains every teacher x seed as its own ``train`` run (``bakeoff_runs``: resumable at
 every point, so running the same command again carries on after Ctrl-C or a crash), evaluates each
-final policy on the hardest task as soon as that run is trained, plays the scripted controller on the
+final policy on the hardest task as soon as that run is trained (then compresses its raw files and
+keeps only that evaluated checkpoint), plays the scripted controller on the
 same episode seeds, sums the runs up per teacher (``bakeoff_statistics``) and writes the results
 (``bakeoff_report``).
 """
@@ -28,6 +29,7 @@ from learner.bakeoff_runs import (
     TRAINING_FLAGS,
     Run,
     RunFailed,
+    archives_runs,
     check_settings,
     evaluate_run,
     further_finished_runs,
@@ -39,6 +41,7 @@ from learner.bakeoff_statistics import TeacherResult
 from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
 from learner.config import LOOPS, TEACHERS, TrainConfig
 from learner.config_file import BakeoffConfigAction
+from learner.run_archive import archive_run
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -158,13 +161,18 @@ def _bakeoff(args: argparse.Namespace) -> int:
     teachers = list(dict.fromkeys(args.teachers))
     settings = {name: getattr(args, name) for name in TRAINING_FLAGS} | {"total_steps": args.total_steps}
     settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params_by_kind(args.teacher_params, teachers)}
+    archive = archives_runs(args.out)
     settings = check_settings(args.out, settings, teachers)
     runs = plan_runs(args.out, teachers, args.seeds)
 
     @functools.cache
     def evaluate(run: Run) -> EvaluationResult:
-        """Each run's final evaluation, computed (or read from its cache file) once per invocation."""
-        return evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
+        """Each run's final evaluation, computed (or read from its cache file) once per invocation; the
+        run, now finished and evaluated, is then archived to what the report reads (``run_archive``)."""
+        result = evaluate_run(run, args.eval_episodes, args.eval_seed, args.eval_processes, args.env)
+        if archive:
+            archive_run(run.directory)
+        return result
 
     if not train_runs(runs, args.total_steps, settings, args.ray_address, lambda run: evaluate(run).summary()):
         return 130

@@ -4,7 +4,8 @@ Each teacher x seed is an ordinary ``kuka-curriculum train`` run in ``DIR/runs/<
 started as a child process: it brings its own teacher service and Ray connection, a crash stays
 inside it, and its log goes to the run directory. Everything here can be resumed: a run whose
 checkpoint reached the budget is skipped, a run with an earlier checkpoint continues from it with
-``--resume``, and each final evaluation is cached next to its checkpoint. Ctrl-C is left to the
+``--resume`` (its raw files decompressed first when an earlier, smaller budget archived it), and each
+final evaluation is cached next to its checkpoint. Ctrl-C is left to the
 training child (it checkpoints and stops); running the same command again carries on.
 """
 
@@ -32,11 +33,12 @@ from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.config import TrainConfig
 from learner.json_file import write_json
 from learner.metrics import METRICS_FILE
+from learner.run_archive import TRAIN_LOG, read_text, restore_run
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"
-TRAIN_LOG = "train.log"
 EVALUATION_FILE = "evaluation.json"
+ARCHIVE_MARKER = "ARCHIVED_RUNS"
 POLL_S = 1.0
 
 TRAINING_FLAGS = {
@@ -120,6 +122,20 @@ def further_finished_runs(out: Path, teacher: str, seeds: int, total_steps: int)
     return runs
 
 
+def archives_runs(out: Path) -> bool:
+    """Whether this bake-off archives its finished runs (``run_archive``): a new directory does, and is
+    marked so for its later invocations; one started before archiving existed (the committed v1
+    bake-offs) keeps its runs as they are, so rerunning its report rewrites none of them."""
+    marker = Path(out) / ARCHIVE_MARKER
+    if not (Path(out) / SETTINGS_FILE).exists():
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text(
+            "Finished runs here are archived: raw files xz-compressed, only the evaluated checkpoint kept.\n",
+            encoding="utf-8",
+        )
+    return marker.exists()
+
+
 def check_settings(out: Path, settings: dict[str, Any], teachers: Sequence[str]) -> dict[str, Any]:
     """Runs in one directory must share their hyperparameters and each teacher its parameters; only
     the step budget may grow. Returns the settings to report: these, with the parameters of teachers
@@ -196,9 +212,9 @@ def _clear_unfinished_start(run: Run) -> None:
 
 def _metrics_records(run: Run) -> list[dict[str, Any]]:
     """The run's metric records; a line cut short (a crash mid-write, or the child writing now) is left out."""
-    path = run.directory / METRICS_FILE
+    text = read_text(run.directory / METRICS_FILE) or ""
     records = []
-    for line in path.read_text(encoding="utf-8").splitlines() if path.exists() else []:
+    for line in text.splitlines():
         try:
             records.append(json.loads(line))
         except json.JSONDecodeError:
@@ -285,6 +301,7 @@ def train_runs(
                 continue
             resume = done[run.name] > 0
             if resume:
+                restore_run(run.directory)
                 (run.directory / EVALUATION_FILE).unlink(missing_ok=True)
             else:
                 _clear_unfinished_start(run)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import lzma
+import shutil
+import sqlite3
 import sys
 
 import imageio.v3 as iio
@@ -17,10 +21,19 @@ from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
 from learner.arguments import UsageError
 from learner.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
-from learner.bakeoff_runs import Run, check_settings, learning_curve, plan_runs, teacher_params_by_kind, train_command
+from learner.bakeoff_runs import (
+    Run,
+    archives_runs,
+    check_settings,
+    learning_curve,
+    plan_runs,
+    teacher_params_by_kind,
+    train_command,
+)
 from learner.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
 from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult
+from learner.run_archive import archive_run, read_text, restore_run
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
@@ -60,6 +73,16 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert bakeoff("--teachers", "fixed", "--total-steps", str(BATCH)) == 0
     fixed, random = plan_runs(out, ["fixed", "random"], seeds=1)
     assert load_checkpoint(latest_checkpoint(fixed.directory)).counters.steps == BATCH
+    # Finished and evaluated, the run is archived: raw files compressed, and resuming undoes that below.
+    assert sorted(path.name for path in fixed.directory.iterdir()) == [
+        "checkpoints",
+        "evaluation.json",
+        "metrics.jsonl.xz",
+        "teacher.log.xz",
+        "teacher.sqlite.xz",
+        "tensorboard",
+        "train.log.xz",
+    ]
     capsys.readouterr()
 
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
@@ -69,8 +92,16 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert printed.index("fixed-seed0: hardest task") < printed.index("random-seed0: training")
     first_random_checkpoint = min(path.stat().st_mtime_ns for path in (random.directory / "checkpoints").iterdir())
     assert (fixed.directory / "evaluation.json").stat().st_mtime_ns < first_random_checkpoint
-    assert f"at step {BATCH:_}" in (fixed.directory / "train.log").read_text()
+    assert f"at step {BATCH:_}" in read_text(fixed.directory / "train.log")
     for run in (fixed, random):
+        # Only the evaluated checkpoint stays (the resumed `fixed` wrote two), and the curve is read compressed.
+        assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [f"step_{2 * BATCH:010d}.pt"]
+        assert not (run.directory / "metrics.jsonl").exists() and not (run.directory / "teacher.sqlite").exists()
+        unpacked = tmp_path / f"{run.name}.sqlite"
+        unpacked.write_bytes(lzma.decompress((run.directory / "teacher.sqlite.xz").read_bytes()))
+        with contextlib.closing(sqlite3.connect(unpacked)) as database:
+            assert database.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+            assert database.execute("SELECT count(*) FROM sqlite_master").fetchone()[0] > 0
         checkpoint = load_checkpoint(latest_checkpoint(run.directory))
         assert checkpoint.counters.steps == 2 * BATCH and checkpoint.config.teacher == run.teacher
         assert checkpoint.config.workers == 1 and checkpoint.config.max_episode_steps == 60
@@ -324,3 +355,48 @@ def test_a_teacher_may_join_a_bakeoff_with_its_own_parameters_but_not_change_the
         check_settings(tmp_path, base | {"teacher_params": {"fixed": {"point": {}}}}, ["fixed"])
     with pytest.raises(UsageError, match=r"adr parameters: \{'step': 0.2\} before, \{\} now"):
         check_settings(tmp_path, base | {"teacher_params": {"adr": {}}}, ["adr"])
+
+
+def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back_the_raw_files(tmp_path):
+    run = Run("fixed", 0, tmp_path / "run")
+    final = save_untrained_checkpoint(run.directory)  # at step 512
+    shutil.copy(final, final.with_name("step_0000000256.pt"))  # an earlier checkpoint, as training leaves
+    records = [{"step": 100, "eval/success_rate": 0.25}, {"step": 200, "eval/success_rate": 0.75}]
+    metrics = "".join(json.dumps(record) + "\n" for record in records)
+    (run.directory / "metrics.jsonl").write_text(metrics)
+    (run.directory / "train.log").write_text("iteration 2 at step 200\n")
+    with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
+        database.execute("PRAGMA journal_mode=WAL")
+        database.execute("CREATE TABLE results (step INTEGER)")
+        database.executemany("INSERT INTO results VALUES (?)", [(step,) for step in range(500)])
+        database.commit()
+    # Today's uncompressed layout (the committed v1 runs) reads as it always did.
+    raw_curve = learning_curve(run, "eval/success_rate")
+    assert raw_curve == {100: 0.25, 200: 0.75}
+
+    archive_run(run.directory)
+    names = sorted(path.name for path in run.directory.iterdir())
+    assert names == ["checkpoints", "metrics.jsonl.xz", "teacher.sqlite.xz", "train.log.xz"]
+    assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [final.name]
+    assert run.steps_done() == 512, "the kept checkpoint still marks the run finished"
+    assert learning_curve(run, "eval/success_rate") == raw_curve
+    assert steps_to_success(run, target=0.5, window=1) == 200
+    assert read_text(run.directory / "train.log") == "iteration 2 at step 200\n"
+    archived = {path: path.stat().st_mtime_ns for path in run.directory.iterdir() if path.is_file()}
+    archive_run(run.directory)
+    assert {path: path.stat().st_mtime_ns for path in archived} == archived, "archiving twice changes nothing"
+
+    restore_run(run.directory)
+    assert (run.directory / "metrics.jsonl").read_text() == metrics
+    assert not list(run.directory.glob("*.xz"))
+    with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
+        assert database.execute("SELECT count(*) FROM results").fetchone() == (500,)
+
+
+def test_a_bakeoff_directory_from_before_archiving_keeps_its_runs_raw(tmp_path):
+    assert archives_runs(tmp_path / "new"), "a new bake-off archives its runs"
+    (tmp_path / "new" / "bakeoff.json").write_text("{}")
+    assert archives_runs(tmp_path / "new"), "and keeps doing so when resumed"
+    (tmp_path / "v1").mkdir()
+    (tmp_path / "v1" / "bakeoff.json").write_text("{}")
+    assert not archives_runs(tmp_path / "v1")
