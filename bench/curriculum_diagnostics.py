@@ -46,6 +46,7 @@ from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
 from learner.config import TrainConfig
 from learner.metrics import METRICS_FILE
+from learner.run_archive import exists, read_text, unpacked
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.store import Store
@@ -123,13 +124,14 @@ class RunData:
 
 def load_run(run_dir: Path) -> RunData:
     """A run's episodes, read in the task space its curriculum was registered with, not an assumed one."""
-    store = Store(run_dir / DATABASE_FILE)
-    try:
-        [curriculum] = store.curricula()
-        results = list(store.results(curriculum.id))
-        spec = json.loads(curriculum.spec)
-    finally:
-        store.close()
+    with unpacked(run_dir / DATABASE_FILE) as database:
+        store = Store(database)
+        try:
+            [curriculum] = store.curricula()
+            results = list(store.results(curriculum.id))
+            spec = json.loads(curriculum.spec)
+        finally:
+            store.close()
     space = stored_spec(curriculum.spec).task_space()
     defaults = TrainConfig(teacher=spec["teacher"]).teacher_params
     changed = [f"{name}={json.dumps(value)}" for name, value in spec["params"].items() if defaults.get(name) != value]
@@ -141,7 +143,7 @@ def load_run(run_dir: Path) -> RunData:
         final_success = np.array(evaluation["per_episode"]["success"], dtype=bool)
         seeds = range(evaluation["seed"], evaluation["seed"] + len(final_success))
         placements = np.array([np_random(seed)[0].random(3) for seed in seeds])
-    records = [json.loads(line) for line in (run_dir / METRICS_FILE).read_text().splitlines() if line.strip()]
+    records = [json.loads(line) for line in (read_text(run_dir / METRICS_FILE) or "").splitlines() if line.strip()]
     times = np.array([record["time"] for record in records])
     steps = np.array([record["step"] for record in records])
     received = np.array([result.received_at for result in results])
@@ -397,10 +399,10 @@ def summary_markdown(runs: Sequence[RunData]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("runs", nargs="+", type=Path, help="run directories (each with teacher.sqlite)")
+    parser.add_argument("runs", nargs="+", type=Path, help="run directories (each with teacher.sqlite[.xz])")
     parser.add_argument("--out", type=Path, required=True, help="directory for the plots and summary.md")
     args = parser.parse_args()
-    runs = [load_run(path) for path in args.runs if (path / DATABASE_FILE).exists()]
+    runs = [load_run(path) for path in args.runs if exists(path / DATABASE_FILE)]
     if not runs:
         raise SystemExit("no run directory with a teacher database among the arguments")
     try:

@@ -14,10 +14,13 @@ and the raw file goes only after that, so a raw file present is always the autho
 
 from __future__ import annotations
 
+import contextlib
 import lzma
 import os
 import shutil
 import sqlite3
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from learner.checkpoint import CHECKPOINT_DIR, latest_checkpoint
@@ -51,6 +54,25 @@ def read_text(path: Path) -> str | None:
     if packed.exists():
         return lzma.decompress(packed.read_bytes()).decode("utf-8", errors="replace")
     return None
+
+
+def exists(path: Path) -> bool:
+    """Whether the file is there, raw or compressed."""
+    return path.exists() or compressed(path).exists()
+
+
+@contextlib.contextmanager
+def unpacked(path: Path) -> Iterator[Path]:
+    """The file itself when raw; else its compressed form decompressed into a temporary file, removed
+    afterwards (a database has to be a plain file for SQLite to open it)."""
+    if path.exists():
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="run-archive-") as scratch:
+        copy = Path(scratch) / path.name
+        with lzma.open(compressed(path), "rb") as source, copy.open("wb") as target:
+            shutil.copyfileobj(source, target)
+        yield copy
 
 
 def _close_database(path: Path) -> None:

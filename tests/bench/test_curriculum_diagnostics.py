@@ -17,6 +17,7 @@ from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from learner.bakeoff_runs import EVALUATION_FILE
 from learner.metrics import METRICS_FILE
+from learner.run_archive import archive_run
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import RandomCurriculum
 from teacher_service.store import NewResult, NewTask, Store, StoredCurriculum
@@ -109,3 +110,17 @@ def test_runs_of_different_spaces_are_refused(
     with pytest.raises(SystemExit, match=r"\(6 parameters\) and .* \(10 parameters\) used different task spaces"):
         main()
     assert not any(tmp_path.iterdir())
+
+
+def test_an_archived_bakeoff_run_reads_as_its_raw_files_did(tmp_path: Path) -> None:
+    run_dir = write_run(tmp_path / "random-seed0", KUKA_TASK_SPACE)
+    raw = load_run(run_dir)
+    archive_run(run_dir)
+    assert not (run_dir / DATABASE_FILE).exists() and (run_dir / f"{DATABASE_FILE}.xz").exists()
+    archived = load_run(run_dir)
+    assert archived.teacher == raw.teacher and archived.space.names == raw.space.names
+    for field in ("unit_tasks", "success", "length", "step", "evaluation_steps", "evaluation_success"):
+        assert np.array_equal(getattr(archived, field), getattr(raw, field)), field
+    assert summary_markdown([archived]) == summary_markdown([raw])
+    names = sorted(path.name for path in run_dir.iterdir())
+    assert names == ["evaluation.json", "metrics.jsonl.xz", "teacher.sqlite.xz"], "no decompressed copy left behind"
