@@ -503,8 +503,7 @@ class CurrotTeacher(Teacher):
             return "success", self.params.success_delta
         if self.params.delta is not None:
             return "return", self.params.delta
-        seen = self._returns.range()
-        return "return", None if seen is None else seen[0] + self.params.success_delta * (seen[1] - seen[0])
+        return "return", self._returns.at(self.params.success_delta)
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         success = UNKNOWN_SUCCESS if result.success is None else float(result.success)

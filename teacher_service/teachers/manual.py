@@ -237,8 +237,7 @@ class ManualTeacher(Teacher):
             return self.params.threshold
         if self.params.metric == "success":
             return LEARNED_SHARE
-        seen = self.scale.range()
-        return None if seen is None else seen[0] + LEARNED_SHARE * (seen[1] - seen[0])
+        return self.scale.at(LEARNED_SHARE)
 
     def _learned_note(self) -> str:
         if self.params.threshold is not None or self.params.metric == "success":

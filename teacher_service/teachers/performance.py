@@ -75,6 +75,12 @@ class ReturnScale:
             return None
         return [self.low, self.high]
 
+    def at(self, share: float) -> float | None:
+        """The return ``share`` of the way from the lowest to the highest seen; ``None`` until two
+        different returns were seen."""
+        seen = self.range()
+        return None if seen is None else seen[0] + share * (seen[1] - seen[0])
+
     def export(self) -> list[float] | None:
         return None if self.low is None or self.high is None else [self.low, self.high]
 
