@@ -35,6 +35,9 @@ from typing import Any
 import gymnasium
 import numpy as np
 
+# A sibling script (bench/ is the script's path, not a package).
+from episode_equivalence import export_commit
+
 from common.kuka import ENV_ID, HARD_V1_ENV_ID
 from common.kuka.bullet import native_output_silenced
 from common.kuka.env import make_kuka_env
@@ -204,12 +207,7 @@ def main() -> None:
         scratch = Path(directory)
         sides: list[tuple[str, str, Path | None]] = [(variant, variant, None) for variant in args.variants]
         if args.baseline is not None:
-            exported = scratch / "baseline"
-            exported.mkdir()
-            archive = subprocess.run(
-                ["git", "archive", args.baseline, "common"], cwd=ROOT, capture_output=True, check=True
-            )
-            subprocess.run(["tar", "-x", "-C", str(exported)], input=archive.stdout, check=True)
+            exported = export_commit(args.baseline, scratch / "baseline", "common")
             others = [variant for variant in args.variants if variant != "original"]
             sides += [(f"{variant} at {args.baseline}", variant, exported) for variant in others]
         reports = {label: SpeedReport() for label, _, _ in sides}

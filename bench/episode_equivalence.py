@@ -124,6 +124,14 @@ def compare(baseline: dict[str, Any], current: dict[str, Any], seed: int) -> int
     return flag_mismatches
 
 
+def export_commit(commit: str, destination: Path, *paths: str) -> Path:
+    """Extract ``paths`` (the whole tree if none) of ``commit`` into ``destination``, created (``git archive``)."""
+    destination.mkdir()
+    archive = subprocess.run(["git", "archive", commit, *paths], cwd=ROOT, capture_output=True, check=True)
+    subprocess.run(["tar", "-x", "-C", str(destination)], input=archive.stdout, check=True)
+    return destination
+
+
 def add_new_modules(exported: Path) -> list[str]:
     """Copy into the exported baseline the working tree's ``common`` modules it lacks (the policies may import
     them); every module the baseline has stays the baseline's. Their names, for the report."""
@@ -156,10 +164,7 @@ def main() -> None:
         return
 
     with tempfile.TemporaryDirectory() as scratch:
-        exported = Path(scratch) / "baseline"
-        exported.mkdir()
-        archive = subprocess.run(["git", "archive", args.baseline, "common"], cwd=ROOT, capture_output=True, check=True)
-        subprocess.run(["tar", "-x", "-C", str(exported)], input=archive.stdout, check=True)
+        exported = export_commit(args.baseline, Path(scratch) / "baseline", "common")
         added = add_new_modules(exported)
         baseline = run_side(args, exported, Path(scratch) / "baseline.json")
         current = run_side(args, None, Path(scratch) / "current.json")

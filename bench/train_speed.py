@@ -40,6 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+# A sibling script (bench/ is the script's path, not a package).
+from episode_equivalence import export_commit
+
 from common.client.task_space import Task
 from common.kuka import ENV_IDS
 from common.kuka.env import KukaGraspEnv
@@ -160,10 +163,7 @@ def timed_train(
 
 def compare_with_baseline(args: argparse.Namespace, family: list[str], scratch: Path) -> None:
     """``train`` of the baseline commit, then of the working tree, per loop; both rates and their ratio."""
-    baseline = scratch / "baseline"
-    baseline.mkdir()
-    archive = subprocess.run(["git", "archive", args.baseline], cwd=ROOT, capture_output=True, check=True)
-    subprocess.run(["tar", "-x", "-C", str(baseline)], input=archive.stdout, check=True)
+    baseline = export_commit(args.baseline, scratch / "baseline")
     print(f"train {' '.join(family)} --workers {args.workers} --total-steps {args.total_steps:_} --seed {args.seed}")
     for loop in args.loops:
         load = os.getloadavg()[0]
