@@ -82,6 +82,7 @@ class ObservationFeatures:
 
 
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+_LOG_SQRT_2PI_FLOAT32 = np.float32(LOG_SQRT_2PI)
 
 
 @dataclass(frozen=True)
@@ -144,6 +145,7 @@ class InferencePolicy:
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
         self.spec = snapshot.spec
         self._features = ObservationFeatures(self.spec)
+        self._log_std_range = self.spec.log_std_range
         self.rng = np.random.default_rng(seed)
         self.version = -1
         self.load(snapshot)
@@ -180,9 +182,9 @@ class InferencePolicy:
         mean = actor[:, : self.spec.action_dim]
         noise = np.zeros_like(mean) if deterministic else self.rng.standard_normal(mean.shape, dtype=np.float32)
         if self.spec.state_dependent_std:
-            log_std = np.clip(actor[:, self.spec.action_dim :], *self.spec.log_std_range)
+            log_std = np.clip(actor[:, self.spec.action_dim :], *self._log_std_range)
             std = np.exp(log_std)
-            offset = (log_std + np.float32(LOG_SQRT_2PI)).sum(axis=-1)
+            offset = (log_std + _LOG_SQRT_2PI_FLOAT32).sum(axis=-1)
         else:
             std, offset = self._std, self._log_density_offset
         log_probs = (-0.5 * (noise * noise).sum(axis=-1) - offset).astype(np.float32)
