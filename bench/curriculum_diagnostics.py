@@ -45,8 +45,7 @@ from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
 from learner.config import TrainConfig
-from learner.metrics import METRICS_FILE
-from learner.run_archive import exists, read_text, unpacked
+from learner.run_archive import exists, metrics_records, unpacked
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.store import Store
@@ -143,7 +142,7 @@ def load_run(run_dir: Path) -> RunData:
         final_success = np.array(evaluation["per_episode"]["success"], dtype=bool)
         seeds = range(evaluation["seed"], evaluation["seed"] + len(final_success))
         placements = np.array([np_random(seed)[0].random(3) for seed in seeds])
-    records = [json.loads(line) for line in (read_text(run_dir / METRICS_FILE) or "").splitlines() if line.strip()]
+    records = metrics_records(run_dir)
     times = np.array([record["time"] for record in records])
     steps = np.array([record["step"] for record in records])
     received = np.array([result.received_at for result in results])
