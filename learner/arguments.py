@@ -11,7 +11,7 @@ from common.client.schemas import TeacherKind
 
 
 class UsageError(Exception):
-    """Bad input: reported in one line, exit code 2."""
+    """Bad input or an unreachable service: reported in one line, exit code 2 (every command's ``run``)."""
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:

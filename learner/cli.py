@@ -23,7 +23,7 @@ from pydantic import SecretStr
 
 from common.client.write_token import TOKEN_VARIABLE, token_problem
 from common.kuka import ENV_IDS
-from learner.arguments import add_override_flags, non_negative_int, positive_int
+from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int
 from learner.config import LOOPS, TEACHERS, TrainConfig
 from learner.config_file import read_config_file
 
@@ -40,10 +40,6 @@ Ray's own choice before Ray is imported (it reads the mode once), it keeps that 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint, and a run
 stopped before its budget exits 128 + the signal's number (130, 143), as a shell reports a signal."""
-
-
-class UsageError(Exception):
-    """Bad input or an unreachable service: reported in one line, exit code 2."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

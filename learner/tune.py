@@ -185,7 +185,7 @@ def _read_space(path: Path) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     try:
         return _tune(args)
-    except (UsageError, cli.UsageError) as error:
+    except UsageError as error:
         print(f"kuka-curriculum tune: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
