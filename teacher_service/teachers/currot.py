@@ -86,7 +86,7 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
-from teacher_service.teachers.performance import ReturnScale
+from teacher_service.teachers.performance import UNKNOWN_SUCCESS, ReturnScale
 from teacher_service.teachers.row_log import RowLog
 
 MAX_PARTICLES = 500
@@ -117,9 +117,6 @@ MAX_PENDING_FITS = 4
 
 RECENT_MOVES = 100
 """Updates the state reports in ``moves``."""
-
-UNKNOWN_SUCCESS = -1.0
-"""The history's success column when a result did not say."""
 
 TOWARD_TARGET, TO_BEST, REPLACED_TOWARD_TARGET, REPLACED_TO_BEST = 0, 1, 2, 3
 WHY = (

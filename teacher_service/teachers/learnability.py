@@ -56,6 +56,7 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
+from teacher_service.teachers.performance import UNKNOWN_SUCCESS
 from teacher_service.teachers.row_log import RowLog
 
 POOL_STREAM = 3
@@ -66,9 +67,6 @@ MAX_BUFFER = 5000
 MAX_NEIGHBOURS = 64
 """Together these bound one refresh: a k-d tree over at most 5,000 results and at most 1,000
 queries of 64 neighbours each."""
-
-UNKNOWN_SUCCESS = -1.0
-"""The history's success column when a result did not say."""
 
 
 class LearnabilityParams(TeacherParams):

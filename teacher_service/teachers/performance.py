@@ -38,6 +38,10 @@ def check_reward_range(reward_range: list[float]) -> None:
         raise ValueError(f"reward_range must have low < high, got {reward_range}")
 
 
+UNKNOWN_SUCCESS = -1.0
+"""A history row's success column when the result did not say (1 or 0 when it did)."""
+
+
 def performance(result: EpisodeResult, reward_range: list[float]) -> float:
     """1 or 0 from ``result.success`` when given, else the return scaled by ``reward_range``."""
     return scored(result.reward, result.success, reward_range)
