@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from learner.config import PPOConfig, TrainConfig
+from learner.config_file import ConfigFile
 
 Target = Literal["ppo", "teacher", "env"]
 Distribution = Literal["choice", "uniform", "loguniform", "randint"]
@@ -88,12 +89,7 @@ def apply_settings(base: TrainConfig, settings: Mapping[str, Any]) -> TrainConfi
     for key, value in settings.items():
         target, _, name = key.partition(".")
         grouped[target][name] = _plain(value)
-    return replace(
-        base,
-        **grouped["env"],
-        ppo=base.ppo.with_overrides(grouped["ppo"]),
-        teacher_overrides={**base.teacher_overrides, **grouped["teacher"]},
-    )
+    return ConfigFile(grouped["env"], grouped["ppo"], grouped["teacher"]).applied_to(base)
 
 
 def _plain(value: Any) -> Any:
