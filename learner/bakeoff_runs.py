@@ -32,8 +32,7 @@ from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.config import TrainConfig
 from learner.json_file import write_json
-from learner.metrics import METRICS_FILE
-from learner.run_archive import TRAIN_LOG, read_text, restore_run
+from learner.run_archive import TRAIN_LOG, metrics_records, restore_run
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"
@@ -210,20 +209,8 @@ def _clear_unfinished_start(run: Run) -> None:
                 shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
 
 
-def _metrics_records(run: Run) -> list[dict[str, Any]]:
-    """The run's metric records; a line cut short (a crash mid-write, or the child writing now) is left out."""
-    text = read_text(run.directory / METRICS_FILE) or ""
-    records = []
-    for line in text.splitlines():
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return records
-
-
 def _logged_steps(run: Run) -> int:
-    records = _metrics_records(run)
+    records = metrics_records(run.directory)
     return int(records[-1]["step"]) if records else 0
 
 
@@ -233,9 +220,8 @@ def learning_curve(run: Run, metric: str = "eval/return") -> dict[int, float]:
     An interrupted run repeats the iterations after its last checkpoint, so a step logged twice
     keeps its latest record.
     """
-    return {
-        int(record["step"]): float(record[metric]) for record in _metrics_records(run) if record.get(metric) is not None
-    }
+    records = metrics_records(run.directory)
+    return {int(record["step"]): float(record[metric]) for record in records if record.get(metric) is not None}
 
 
 def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_runs: int) -> bool:

@@ -15,6 +15,7 @@ and the raw file goes only after that, so a raw file present is always the autho
 from __future__ import annotations
 
 import contextlib
+import json
 import lzma
 import os
 import shutil
@@ -22,6 +23,7 @@ import sqlite3
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from learner.checkpoint import CHECKPOINT_DIR, latest_checkpoint
 from learner.metrics import METRICS_FILE
@@ -54,6 +56,18 @@ def read_text(path: Path) -> str | None:
     if packed.exists():
         return lzma.decompress(packed.read_bytes()).decode("utf-8", errors="replace")
     return None
+
+
+def metrics_records(run_dir: Path) -> list[dict[str, Any]]:
+    """The run's metric records, from either form of its metrics log; a line cut short (a crash mid-write,
+    or the training process writing now) is left out."""
+    records = []
+    for line in (read_text(Path(run_dir) / METRICS_FILE) or "").splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
 
 
 def exists(path: Path) -> bool:

@@ -10,7 +10,6 @@ The curves come from each trial's own ``metrics.jsonl``, so they survive ``--res
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -21,7 +20,7 @@ from ray.tune import Callback
 
 from learner.config_file import NOTES_KEY
 from learner.json_file import write_json
-from learner.metrics import METRICS_FILE
+from learner.run_archive import metrics_records
 from learner.tune_space import SearchSpace
 
 if TYPE_CHECKING:
@@ -85,13 +84,8 @@ class TuneReport:
 def evaluation_curve(run_dir: Path) -> list[dict[str, float]]:
     """The run's in-run evaluations by step; a step logged twice (a resumed run repeats the iterations
     after its last checkpoint) keeps its latest record."""
-    path = Path(run_dir) / METRICS_FILE
     by_step: dict[int, dict[str, float]] = {}
-    for line in path.read_text(encoding="utf-8").splitlines() if path.exists() else []:
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # a line cut short by a crash
+    for record in metrics_records(run_dir):
         if record.get("eval/success_rate") is not None:
             by_step[int(record["step"])] = {
                 "steps": float(record["step"]),
