@@ -32,6 +32,7 @@ from common.kuka import ENV_IDS
 from learner import cli
 from learner.arguments import UsageError, add_override_flags, positive_int
 from learner.config import TEACHERS, TrainConfig
+from learner.config_file import ConfigFile
 from learner.json_file import write_json
 from learner.tune_space import SearchSpace, SearchSpaceError, apply_settings, parse_search_space
 
@@ -119,10 +120,7 @@ class TuneSettings:
             eval_every=self.eval_every,
             eval_episodes=self.eval_episodes,
         )
-        return apply_settings(
-            config,
-            {f"ppo.{k}": v for k, v in self.ppo.items()} | {f"teacher.{k}": v for k, v in self.teacher_params.items()},
-        )
+        return ConfigFile(ppo=self.ppo, teacher_params=self.teacher_params).applied_to(config)
 
     def space(self) -> SearchSpace:
         return parse_search_space(self.search_space, self.teacher)
