@@ -183,8 +183,12 @@ class PPOLearner:
         metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
         metrics["learning_rate"] = learning_rate
         metrics["explained_variance"] = _explained_variance(old_values.numpy(), returns.numpy())
-        with torch.no_grad():
-            metrics["action_std"] = float(self.network.mean_and_log_std(observations)[1].exp().mean().item())
+        with torch.no_grad():  # a shared log-std needs no pass over the batch; a per-state one is averaged over it
+            if self.network.spec.state_dependent_std:
+                log_std = self.network.mean_and_log_std(observations)[1]
+            else:
+                log_std = self.network.actor_log_std
+            metrics["action_std"] = float(log_std.exp().mean().item())
         return metrics
 
     def state_dict(self) -> dict[str, Any]:
