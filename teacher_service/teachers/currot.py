@@ -2,9 +2,10 @@
 
 The curriculum is a cloud of task particles; each task is a particle picked at random plus a little
 uniform noise. Every ``update_every`` results the particles move toward a target distribution (by
-default samples of the uniform distribution over the box; optionally the space's hardest task),
-each at most ``max_move`` per update, and a particle the student is estimated to master only to
-places where the estimated performance stays at or above the bar.
+default samples of the uniform distribution over the box; optionally the space's hardest task, or
+samples of the uniform distribution over a smaller box given in ``target_box``), each at most
+``max_move`` per update, and a particle the student is estimated to master only to places where
+the estimated performance stays at or above the bar.
 
 One update follows the authors' main branch (github.com/psclklnk/currot: ``CurrOT``,
 ``WassersteinSuccessBuffer``, ``SamplingWassersteinInterpolation``):
@@ -77,7 +78,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
@@ -85,7 +86,7 @@ from scipy.special import ndtri
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
-from teacher_service.teachers.params import FiniteFloat, TeacherParams
+from teacher_service.teachers.params import FiniteFloat, TaskBox, TeacherParams, box_in_space, check_target_box
 from teacher_service.teachers.performance import UNKNOWN_SUCCESS, ReturnScale
 from teacher_service.teachers.row_log import RowLog
 
@@ -153,9 +154,14 @@ class CurrotParams(TeacherParams):
     noise: float = Field(default=0.001, ge=0.0, le=0.5)
     """Half-width of the uniform noise added to a particle to make a task, per dimension in units of
     the dimension's width (the authors: 0.001)."""
-    target: Literal["uniform", "hardest"] = "uniform"
-    """Where the particles head: samples of the uniform distribution over the box, or the space's
-    hardest task."""
+    target: Literal["uniform", "hardest", "box"] = "uniform"
+    """Where the particles head: samples of the uniform distribution over the box, the space's
+    hardest task, or samples of the uniform distribution over ``target_box``."""
+    target_box: TaskBox | None = None
+    """With ``target`` = box (and only then): parameter name to [low, high] in task units; a
+    parameter not named is held at its hardest value, and [a, a] holds it at a. For a parameter
+    that success does not depend on (KUKA's ``shaping``), ``{"shaping": [0, 1]}`` leads every other
+    parameter to its hardest value and leaves that one free."""
     start: Literal["uniform", "easiest"] = "uniform"
     """Where the particles start: uniform over the box (as in the authors' experiments), or near the
     space's easiest task."""
@@ -168,6 +174,28 @@ class CurrotParams(TeacherParams):
     distances: Literal["unit", "raw"] = "unit"
     """Distances measured in the box rescaled to [0, 1] per dimension, or in the task's own units
     (the authors')."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CurrotParams:
+        check_target_box(self.target, self.target_box)
+        return self
+
+
+@dataclass(frozen=True)
+class TargetBox:
+    """Where the particles head, in unit coordinates: samples uniform in [``low``, ``high``]; the
+    whole box for ``uniform``, one point for ``hardest``."""
+
+    low: np.ndarray
+    high: np.ndarray
+
+    def samples(self, uniforms: Callable[[tuple[int, int]], np.ndarray], count: int) -> np.ndarray:
+        """``count`` samples from ``uniforms`` (shape to uniforms on [0, 1)). A point takes no draws and
+        the whole box takes them unchanged, so both targets draw as they did before boxes."""
+        if np.array_equal(self.low, self.high):
+            return np.tile(self.low, (count, 1))
+        drawn: np.ndarray = self.low + (self.high - self.low) * uniforms((count, len(self.low)))
+        return drawn
 
 
 @dataclass(frozen=True)
@@ -374,15 +402,15 @@ def move_particles(
     inputs: FitInputs,
     radius: float,
     candidates: int,
-    target: np.ndarray | None,
+    target: TargetBox,
     scale: np.ndarray,
     walk: bool,
     random_state: int,
 ) -> ParticleFit:
     """One CURROT update (see the module docstring). Geometry runs in unit coordinates times
     ``scale`` (ones, or the parameters' widths); ``radius`` is the longest move in those units;
-    ``target`` is a unit point, or ``None`` for samples of the uniform distribution; ``walk`` bounds
-    the move of a replaced particle too."""
+    each particle heads for a sample of ``target``; ``walk`` bounds the move of a replaced particle
+    too."""
     rng = np.random.Generator(np.random.PCG64(random_state))
     n, dims = inputs.particles.shape
     bar = math.inf if inputs.bar is None else inputs.bar
@@ -409,7 +437,7 @@ def move_particles(
             particles[replaced] = samples[picked]
             reached[replaced] = valid[picked]
 
-    goals = (rng.random((n, dims)) if target is None else np.tile(target, (n, 1))) * scale
+    goals = target.samples(rng.random, n) * scale
     goals = _assign(particles, goals)
     radii = np.minimum(radius, np.linalg.norm(goals - particles, axis=-1))
     ball = _ball(rng, particles, goals, radii, reached, candidates, scale)
@@ -443,9 +471,13 @@ class CurrotTeacher(Teacher):
     def __init__(self, space: TaskSpace, seed: int, params: CurrotParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         dims, count = len(space), self.params.particles
-        self._target: np.ndarray | None = None
-        if self.params.target == "hardest":
-            self._target = self._anchor("target", space.hardest)
+        if self.params.target_box is not None:
+            self._target = TargetBox(*box_in_space("target_box", self.params.target_box, space))
+        elif self.params.target == "hardest":
+            hardest = self._anchor("target", space.hardest)
+            self._target = TargetBox(hardest, hardest)
+        else:
+            self._target = TargetBox(np.zeros(dims), np.ones(dims))
         start = indexed_uniforms(seed, FIT_STREAM, 0, count, dims)
         if self.params.start == "easiest":
             easiest = self._anchor("start", space.easiest)
@@ -557,10 +589,8 @@ class CurrotTeacher(Teacher):
         )
 
     def _target_samples(self, index: int) -> np.ndarray:
-        count, dims = self.params.particles, len(self.space)
-        if self._target is not None:
-            return np.tile(self._target, (count, 1))
-        return np.random.default_rng([indexed_seed(self.seed, FIT_STREAM, index), 1]).random((count, dims))
+        rng = np.random.default_rng([indexed_seed(self.seed, FIT_STREAM, index), 1])
+        return self._target.samples(rng.random, self.params.particles)
 
     def refit_job(self, index: int) -> FitJob:
         """Update ``index`` starts from the inputs fixed when it fell due (kept until a later update
@@ -681,6 +711,18 @@ class CurrotTeacher(Teacher):
         self._returns = ReturnScale(state["returns_seen"])
         self._moves.extend(state["moves"])
 
+    def _target_view(self) -> Task | dict[str, list[float]] | None:
+        """The target in task units: none for ``uniform``, a task for ``hardest``, a range per
+        parameter for ``box``."""
+        if self.params.target == "uniform":
+            return None
+        low, high = (
+            self.space.from_array(self.space.from_unit(corner)) for corner in (self._target.low, self._target.high)
+        )
+        if self.params.target == "hardest":
+            return low
+        return {name: [low[name], high[name]] for name in self.space.names}
+
     def _mean_task(self, particles: np.ndarray) -> Task:
         return self.space.from_array(self.space.from_unit(particles.mean(axis=0)))
 
@@ -703,7 +745,7 @@ class CurrotTeacher(Teacher):
             "success_buffer": len(self._successes),
             "failures_kept": len(self._failures),
             "threshold_reached": self._threshold_reached,
-            "target": None if self._target is None else self.space.from_array(self.space.from_unit(self._target)),
+            "target": self._target_view(),
             "fits": self.fits_installed,
             "fits_requested": self.fits_requested,
             "last_fit_index": None if fit is None else fit.index,

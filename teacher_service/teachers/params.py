@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, Strict
 from typing_extensions import Self
 
 from common.client.schemas import FiniteFloat
@@ -24,7 +25,30 @@ TaskParam = Annotated[
 ]
 """A task-valued parameter; ``in_space`` checks it against the teacher's space."""
 
-__all__ = ["FiniteFloat", "TaskParam", "TeacherParams", "given_or_anchor", "in_space"]
+TaskRange = Annotated[tuple[Annotated[FiniteFloat, Strict()], Annotated[FiniteFloat, Strict()]], Strict(False)]
+"""A [low, high] pair: lax only in taking a JSON list for the pair, strict about the numbers."""
+
+TaskBox = Annotated[
+    dict[Annotated[str, Field(max_length=64)], TaskRange],
+    Field(
+        min_length=1,
+        max_length=64,
+        description="A box of tasks: parameter name to [low, high] inside the curriculum's space; "
+        "a parameter not named sits at its hardest value.",
+    ),
+]
+"""A box-valued parameter; ``box_in_space`` checks it against the teacher's space."""
+
+__all__ = [
+    "FiniteFloat",
+    "TaskBox",
+    "TaskParam",
+    "TeacherParams",
+    "box_in_space",
+    "check_target_box",
+    "given_or_anchor",
+    "in_space",
+]
 
 
 class TeacherParams(BaseModel):
@@ -63,3 +87,35 @@ def in_space(name: str, task: Task, space: TaskSpace) -> Task:
         return space.validate(task)
     except ValueError as error:
         raise ValueError(f"{name}: {error}") from None
+
+
+def check_target_box(target: str, target_box: Mapping[str, tuple[float, float]] | None) -> None:
+    """``target`` = box needs a ``target_box``, and a ``target_box`` needs ``target`` = box."""
+    if target == "box" and target_box is None:
+        raise ValueError("target 'box' needs a target_box: parameter name to [low, high]")
+    if target != "box" and target_box is not None:
+        raise ValueError(f"target_box is read only with target 'box', not {target!r}")
+
+
+def box_in_space(name: str, box: Mapping[str, tuple[float, float]], space: TaskSpace) -> tuple[np.ndarray, np.ndarray]:
+    """A box-valued parameter checked against the space: its low and high corners in unit
+    coordinates, each parameter it does not name at the space's hardest value; a failure names the
+    parameter."""
+    unknown = sorted(set(box) - set(space.names))
+    if unknown:
+        raise ValueError(f"{name}: unknown task parameter(s) {unknown}; expected {list(space.names)}")
+    corners = np.empty((2, len(space)))
+    for column, p in enumerate(space.parameters):
+        if p.name in box:
+            low, high = box[p.name]
+            if low > high:
+                raise ValueError(f"{name}: {p.name!r} needs low <= high, got [{low}, {high}]")
+            if low < p.low or high > p.high:
+                raise ValueError(f"{name}: {p.name!r} range [{low}, {high}] is outside its bounds [{p.low}, {p.high}]")
+        elif p.hardest is None:
+            raise ValueError(f"{name}: {p.name!r} is not given and this task space defines no hardest value for it")
+        else:
+            low = high = p.hardest
+        corners[:, column] = low, high
+    unit: np.ndarray = space.to_unit(corners)
+    return unit[0], unit[1]

@@ -6,7 +6,8 @@ Tasks come from one Gaussian with a diagonal covariance, held on tasks rescaled 
 parameter and truncated to the box when sampled. It starts on the easiest task with a small spread
 and moves toward a target distribution: by default a narrow Gaussian on the space's hardest task,
 or (``target="uniform"``) the uniform distribution over the box, stood in for by the Gaussian
-with its mean and variances. Every ``update_every`` results the Gaussian is re-chosen:
+with its mean and variances, or (``target="box"``) the same stand-in for the uniform distribution
+over ``target_box``. Every ``update_every`` results the Gaussian is re-chosen:
 
 - if the expected performance of the current Gaussian (the mean performance of those results,
   ``performance.py``) is at least ``zeta``, the new Gaussian is the one closest to the target in
@@ -75,7 +76,14 @@ from threadpoolctl import ThreadpoolController
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
+from teacher_service.teachers.params import (
+    TaskBox,
+    TaskParam,
+    TeacherParams,
+    box_in_space,
+    check_target_box,
+    given_or_anchor,
+)
 from teacher_service.teachers.performance import ReturnScale, RewardRange, check_reward_range, scored
 
 MIN_SPREAD = 1e-3
@@ -106,10 +114,18 @@ class SelfPacedParams(TeacherParams):
     """Mean of the first Gaussian; null starts at the space's easiest point."""
     initial_spread: float = Field(default=0.05, ge=MIN_SPREAD, le=MAX_SPREAD)
     """Standard deviation of the first Gaussian per parameter, in widths of the parameter."""
-    target: Literal["hardest", "uniform"] = "hardest"
-    """Where to go: a narrow Gaussian on the space's hardest task, or the uniform distribution."""
+    target: Literal["hardest", "uniform", "box"] = "hardest"
+    """Where to go: a narrow Gaussian on the space's hardest task, the uniform distribution, or the
+    uniform distribution over ``target_box``."""
+    target_box: TaskBox | None = None
+    """With ``target`` = box (and only then): parameter name to [low, high] in task units; a
+    parameter not named is held at its hardest value, and [a, a] holds it at a. Its stand-in is
+    the Gaussian with the box's centre and, per parameter, the uniform's standard deviation (width
+    / sqrt(12)) or ``target_spread`` if larger: a point is held as ``hardest`` holds it, and a box
+    over the whole space is the ``uniform`` target (unless ``target_spread`` exceeds 0.29)."""
     target_spread: float = Field(default=0.05, ge=MIN_SPREAD, le=MAX_SPREAD)
-    """Standard deviation of the ``hardest`` target per parameter, in widths of the parameter."""
+    """Standard deviation of the ``hardest`` target per parameter, in widths of the parameter; the
+    least one of the ``box`` target's."""
     zeta: float = Field(default=0.25, ge=0.0, le=1.0)
     """The bar: the expected performance (success rate, or return scaled by ``reward_range``) the
     Gaussian must keep while it moves toward the target."""
@@ -130,6 +146,7 @@ class SelfPacedParams(TeacherParams):
     def _consistent(self) -> SelfPacedParams:
         if self.reward_range is not None:
             check_reward_range(self.reward_range)
+        check_target_box(self.target, self.target_box)
         return self
 
 
@@ -343,7 +360,11 @@ class SelfPacedTeacher(Teacher):
         start = space.to_array(given_or_anchor("start", self.params.start, space, "easiest"))
         dims = len(space)
         self.gaussian = Gaussian(space.to_unit(start), np.full(dims, np.log(self.params.initial_spread)))
-        if self.params.target == "hardest":
+        if self.params.target_box is not None:
+            low, high = box_in_space("target_box", self.params.target_box, space)
+            spread = np.maximum((high - low) * UNIFORM_SPREAD, self.params.target_spread)
+            self.target = Gaussian((low + high) / 2, np.log(spread))
+        elif self.params.target == "hardest":
             try:
                 hardest = space.to_array(space.hardest())
             except ValueError as error:

@@ -298,7 +298,7 @@ def test_a_stored_fit_installs_bit_for_bit() -> None:
         ({"delta": float("inf")}, r"delta\n  Input should be a finite number"),
         ({"success_delta": 1.5}, r"success_delta\n  Input should be less than or equal to 1"),
         ({"noise": -0.1}, r"noise\n  Input should be greater than or equal to 0"),
-        ({"target": "easiest"}, r"target\n  Input should be 'uniform' or 'hardest'"),
+        ({"target": "easiest"}, r"target\n  Input should be 'uniform', 'hardest' or 'box'"),
         ({"start": "hardest"}, r"start\n  Input should be 'uniform' or 'easiest'"),
     ],
 )

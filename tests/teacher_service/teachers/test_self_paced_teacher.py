@@ -198,7 +198,7 @@ def test_kuka_defaults() -> None:
         ({"update_every": 10**6}, r"update_every\n  Input should be less than or equal to 1000"),
         ({"zeta": 1.5}, r"zeta\n  Input should be less than or equal to 1"),
         ({"initial_spread": 0.0}, r"initial_spread\n  Input should be greater than or equal to 0.001"),
-        ({"target": "easiest"}, r"target\n  Input should be 'hardest' or 'uniform'"),
+        ({"target": "easiest"}, r"target\n  Input should be 'hardest', 'uniform' or 'box'"),
         ({"reward_range": [2.0, 2.0]}, "reward_range must have low < high"),
         ({"start": {"x": 0.5}}, "start: missing task parameter"),
     ],
