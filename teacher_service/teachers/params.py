@@ -9,11 +9,11 @@ Checks that need the task space (a task-valued parameter lying inside it) run in
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, Strict
+from pydantic import BaseModel, ConfigDict, Field
 from typing_extensions import Self
 
 from common.client.schemas import FiniteFloat
@@ -25,8 +25,8 @@ TaskParam = Annotated[
 ]
 """A task-valued parameter; ``in_space`` checks it against the teacher's space."""
 
-TaskRange = Annotated[tuple[Annotated[FiniteFloat, Strict()], Annotated[FiniteFloat, Strict()]], Strict(False)]
-"""A [low, high] pair: lax only in taking a JSON list for the pair, strict about the numbers."""
+TaskRange = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+"""A [low, high] pair of task values."""
 
 TaskBox = Annotated[
     dict[Annotated[str, Field(max_length=64)], TaskRange],
@@ -89,7 +89,7 @@ def in_space(name: str, task: Task, space: TaskSpace) -> Task:
         raise ValueError(f"{name}: {error}") from None
 
 
-def check_target_box(target: str, target_box: Mapping[str, tuple[float, float]] | None) -> None:
+def check_target_box(target: str, target_box: Mapping[str, Sequence[float]] | None) -> None:
     """``target`` = box needs a ``target_box``, and a ``target_box`` needs ``target`` = box."""
     if target == "box" and target_box is None:
         raise ValueError("target 'box' needs a target_box: parameter name to [low, high]")
@@ -97,7 +97,7 @@ def check_target_box(target: str, target_box: Mapping[str, tuple[float, float]] 
         raise ValueError(f"target_box is read only with target 'box', not {target!r}")
 
 
-def box_in_space(name: str, box: Mapping[str, tuple[float, float]], space: TaskSpace) -> tuple[np.ndarray, np.ndarray]:
+def box_in_space(name: str, box: Mapping[str, Sequence[float]], space: TaskSpace) -> tuple[np.ndarray, np.ndarray]:
     """A box-valued parameter checked against the space: its low and high corners in unit
     coordinates, each parameter it does not name at the space's hardest value; a failure names the
     parameter."""

@@ -65,7 +65,7 @@ def succeed_everywhere(taught: Teacher, results: int) -> None:
             {"target": "box", "target_box": {"free": [0.0, 2.5]}},
             r"target_box: 'free' range \[0.0, 2.5\] is outside its bounds \[0.0, 2.0\]",
         ),
-        ({"target": "box", "target_box": {"a": [0, 0.5, 1]}}, r"target_box.a\n  Tuple should have at most 2 items"),
+        ({"target": "box", "target_box": {"a": [0, 0.5, 1]}}, r"target_box.a\n  List should have at most 2 items"),
         ({"target": "box", "target_box": {"a": ["0", 1]}}, r"target_box.a.0\n  Input should be a valid number"),
         ({"target": "box", "target_box": {"a": [0, math.inf]}}, r"target_box.a.1\n  Input should be a finite number"),
         (
@@ -90,19 +90,19 @@ def test_a_parameter_left_out_needs_a_hardest_value(kind: str, _: dict[str, Any]
 
 
 def test_the_box_in_unit_coordinates_holds_what_it_does_not_name_at_the_hardest_value() -> None:
-    low, high = box_in_space("target_box", {"free": (0.5, 1.5)}, SPACE)
+    low, high = box_in_space("target_box", {"free": [0.5, 1.5]}, SPACE)
     assert low.tolist() == [1.0, 0.25] and high.tolist() == [1.0, 0.75]
 
 
 def test_currot_target_samples_are_uniform_in_the_box_and_its_state_shows_the_box() -> None:
-    low, high = box_in_space("target_box", {"free": (0.5, 1.5)}, SPACE)
+    low, high = box_in_space("target_box", {"free": [0.5, 1.5]}, SPACE)
     samples = TargetBox(low, high).samples(np.random.default_rng(0).random, 2000)
     assert np.all(samples[:, 0] == 1.0)
     assert samples[:, 1].min() >= 0.25 and samples[:, 1].max() <= 0.75
     assert np.std(samples[:, 1]) == pytest.approx(0.5 / math.sqrt(12), rel=0.05)
     state = teacher("currot", {"target": "box", "target_box": {"free": [0.5, 1.5]}}).state()
     assert state["target"] == {"a": [1.0, 1.0], "free": [0.5, 1.5]}
-    assert state["params"]["target_box"] == {"free": (0.5, 1.5)}
+    assert state["params"]["target_box"] == {"free": [0.5, 1.5]}
 
 
 def test_currot_heads_for_the_box_leaving_the_free_parameter_spread() -> None:
