@@ -15,6 +15,7 @@ import signal
 import socket
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -195,11 +196,12 @@ def _train(args: argparse.Namespace) -> int:
         _check_reachable(args.ray_address)
 
     with contextlib.ExitStack() as stack:
-        teacher_url = _teacher(args.teacher_url, run_dir, stack)
+        teacher_ready = launch_teacher(args.teacher_url, run_dir, stack)
+        connect_ray(args.ray_address, config.workers, stack)
+        teacher_url = teacher_ready()
         name = curriculum_name(run_dir)
         _register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
-        connect_ray(args.ray_address, config.workers, stack)
         return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
 
 
@@ -215,14 +217,27 @@ def _token_from_environment() -> SecretStr | None:
     return SecretStr(token)
 
 
-def _teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> str:
-    from learner.teacher_process import local_teacher_service
+def launch_teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> Callable[[], str]:
+    """A wait for the teacher service's URL: a service of its own in ``run_dir``, launched now so the
+    caller can start Ray while it starts, or the one at ``url``, checked at once so a wrong address
+    fails before Ray starts."""
+    from learner.teacher_process import launch_local_teacher_service
 
     if url is None:
-        try:
-            return stack.enter_context(local_teacher_service(run_dir))
-        except RuntimeError as error:
-            raise UsageError(str(error)) from None
+        ready = launch_local_teacher_service(run_dir, stack)
+
+        def local_url() -> str:
+            try:
+                return ready()
+            except RuntimeError as error:
+                raise UsageError(str(error)) from None
+
+        return local_url
+    checked = _reachable_teacher(url)
+    return lambda: checked
+
+
+def _reachable_teacher(url: str) -> str:
     url = url.rstrip("/")
     import httpx
 

@@ -65,6 +65,13 @@ class ServiceProcess:
         return self._process.pid
 
     def start(self, timeout: float = 60.0) -> ServiceProcess:
+        self.launch()
+        self.wait_until_healthy(timeout)
+        return self
+
+    def launch(self) -> ServiceProcess:
+        """Start the child without waiting for it, so a caller can start other things meanwhile;
+        ``wait_until_healthy`` then waits for it."""
         if self._process is not None and self._process.poll() is None:
             raise RuntimeError(f"the service at {self.url} is already running")
         self.db.parent.mkdir(parents=True, exist_ok=True)
@@ -86,11 +93,13 @@ class ServiceProcess:
             self._process = subprocess.Popen(
                 command, stdout=log, stderr=subprocess.STDOUT, env=self.env, start_new_session=self.own_session
             )
-        self._wait_healthy(timeout)
         return self
 
-    def _wait_healthy(self, timeout: float) -> None:
-        assert self._process is not None
+    def wait_until_healthy(self, timeout: float) -> None:
+        """Return once ``/healthz`` answers; raise ``RuntimeError`` (with the log's tail) if the child
+        exits first or does not answer within ``timeout`` seconds (it is then killed)."""
+        if self._process is None:
+            raise RuntimeError("the service was not launched")
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
