@@ -43,6 +43,8 @@ SCHEDULERS = ("asha", "none")
 METRICS: dict[str, str] = {"success": "eval/success_rate", "return": "eval/return"}
 """The metric a tune ranks by, and the in-run evaluation it comes from (the hardest task)."""
 ASHA_REDUCTION = 3
+MAX_TRIALS = 1000
+"""The most trials one tune may run, grids included: a search space file cannot ask for an unbounded cost."""
 DEFAULTS = TrainConfig()
 
 
@@ -53,13 +55,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     search.add_argument(
         "--search-space",
         type=Path,
-        help="JSON or YAML file: setting name -> {choice: [...]} | {uniform: [lo, hi]} | {loguniform: [lo, hi]} "
-        "| {randint: [lo, hi]}; names are PPOConfig fields, the teacher's parameters or max_episode_steps "
-        "(see docs/tune.md)",
+        help="JSON or YAML file: setting name -> {choice: [...]} | {grid: [...]} | {uniform: [lo, hi]} "
+        "| {loguniform: [lo, hi]} | {randint: [lo, hi]}; names are PPOConfig fields, the teacher's parameters "
+        "or max_episode_steps (see docs/tune.md)",
     )
-    search.add_argument("--trials", type=positive_int, help="trials to sample (default 8)")
+    search.add_argument("--trials", type=positive_int, help="trials to sample, each once per grid point (default 8)")
     search.add_argument("--total-steps", type=positive_int, help="environment steps per trial (default 200_000)")
     search.add_argument("--scheduler", choices=SCHEDULERS, help="asha stops trailing trials early (default asha)")
+    search.add_argument(
+        "--grace-steps",
+        type=positive_int,
+        help="steps every trial trains before ASHA may stop it, its first rung (default a ninth of --total-steps)",
+    )
     search.add_argument(
         "--metric", choices=tuple(METRICS), help="in-run evaluation on the hardest task to rank by (default success)"
     )
@@ -74,6 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--eval-every", type=positive_int, help="iterations between in-run evaluations, the reported metric (default 1)"
     )
     trial.add_argument("--eval-episodes", type=positive_int, help="episodes per in-run evaluation (default 10)")
+    trial.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        help="iterations between a trial's checkpoints, where --resume picks it up (default 1)",
+    )
     add_override_flags(trial, "for every trial, unless searched")
     where = parser.add_argument_group("where")
     where.add_argument("--out", type=Path, default=Path("runs/tune"), help="tune directory (default runs/tune)")
@@ -97,6 +109,7 @@ class TuneSettings:
     trials: int = 8
     total_steps: int = 200_000
     scheduler: Literal["asha", "none"] = "asha"
+    grace_steps: int | None = None
     metric: Literal["success", "return"] = "success"
     max_concurrent: int | None = None
     seed: int = 0
@@ -104,11 +117,13 @@ class TuneSettings:
     envs_per_worker: int = DEFAULTS.envs_per_worker
     eval_every: int = 1
     eval_episodes: int = 10
+    checkpoint_every: int = 1
     ppo: dict[str, Any] = field(default_factory=dict)
     teacher_params: dict[str, Any] = field(default_factory=dict)
 
     def base_config(self) -> TrainConfig:
-        """Every trial's config before its draws; a checkpoint each iteration, so a resumed trial loses little."""
+        """Every trial's config before its draws; by default a checkpoint each iteration, so a resumed trial
+        loses little (long trials may take one every few iterations: each is ~150 kB on disk)."""
         config = TrainConfig(
             teacher=self.teacher,  # type: ignore[arg-type]  # one of TEACHERS, checked by TrainConfig
             env=self.env,
@@ -116,7 +131,7 @@ class TuneSettings:
             workers=self.workers,
             envs_per_worker=self.envs_per_worker,
             seed=self.seed,
-            checkpoint_every=1,
+            checkpoint_every=self.checkpoint_every,
             eval_every=self.eval_every,
             eval_episodes=self.eval_episodes,
         )
@@ -132,6 +147,7 @@ _SETTING_FLAGS = (
     "trials",
     "total_steps",
     "scheduler",
+    "grace_steps",
     "metric",
     "max_concurrent",
     "seed",
@@ -139,6 +155,7 @@ _SETTING_FLAGS = (
     "envs_per_worker",
     "eval_every",
     "eval_episodes",
+    "checkpoint_every",
 )
 
 
@@ -201,6 +218,13 @@ def _tune(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.search_space or args.out / SETTINGS_FILE}: {error}") from None
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if settings.trials * space.grid_size > MAX_TRIALS:
+        raise UsageError(
+            f"{settings.trials} trials × {space.grid_size} grid points is more than {MAX_TRIALS} trials; "
+            "sample fewer or shorten the grids"
+        )
+    if settings.grace_steps is not None and settings.grace_steps > settings.total_steps:
+        raise UsageError(f"--grace-steps {settings.grace_steps} is beyond --total-steps {settings.total_steps}")
     token = cli._token_from_environment()
     if args.ray_address is not None:
         cli._check_reachable(args.ray_address)
@@ -210,10 +234,11 @@ def _tune(args: argparse.Namespace) -> int:
         write_json(out / SETTINGS_FILE, asdict(settings))
 
     with contextlib.ExitStack() as stack:
-        teacher_url = cli._teacher(args.teacher_url, out, stack)
-        public_url = (args.public_url or os.environ.get(cli.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
+        teacher_ready = cli.launch_teacher(args.teacher_url, out, stack)
         # A local cluster counts at least one trial's CPUs, so one trial always fits and the others queue.
         cli.connect_ray(args.ray_address, base.workers + 1, stack)
+        teacher_url = teacher_ready()
+        public_url = (args.public_url or os.environ.get(cli.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         from learner.tune_report import write_reports  # imports Ray, so after connect_ray has chosen its auth mode
 
         print(f"tune directory: {out}")
@@ -342,7 +367,7 @@ def _fit(settings: TuneSettings, space: SearchSpace, setup: TrialSetup, out: Pat
             scheduler = ASHAScheduler(
                 time_attr="steps",
                 max_t=settings.total_steps,
-                grace_period=max(1, settings.total_steps // ASHA_REDUCTION**2),
+                grace_period=settings.grace_steps or max(1, settings.total_steps // ASHA_REDUCTION**2),
                 reduction_factor=ASHA_REDUCTION,
             )
         tuner = tune.Tuner(
@@ -361,7 +386,7 @@ def _fit(settings: TuneSettings, space: SearchSpace, setup: TrialSetup, out: Pat
                 storage_path=str(out),
                 failure_config=tune.FailureConfig(max_failures=0, fail_fast=False),
                 verbose=0,
-                callbacks=[TuneProgress(settings.metric, settings.trials)],
+                callbacks=[TuneProgress(settings.metric, settings.trials * space.grid_size)],
             ),
         )
     tuner.fit()

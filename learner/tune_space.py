@@ -5,6 +5,9 @@ one distribution::
 
     {"learning_rate": {"loguniform": [1e-4, 1e-3]}, "fit_rate": {"choice": [100, 250]}}
 
+A ``grid`` entry is not drawn: every trial sample runs once with each of its values (every
+combination where there are several grids), so a tune can compare settings side by side.
+
 A name is a ``PPOConfig`` field, a parameter of the tuned teacher kind, or a task-family option
 (``max_episode_steps``, the episode limit); a prefix (``ppo.``, ``teacher.``, ``env.``) picks one
 where a bare name would be ambiguous. Every value a distribution can draw is checked against the
@@ -28,8 +31,8 @@ from learner.config import PPOConfig, TrainConfig
 from learner.config_file import ConfigFile
 
 Target = Literal["ppo", "teacher", "env"]
-Distribution = Literal["choice", "uniform", "loguniform", "randint"]
-DISTRIBUTIONS: tuple[Distribution, ...] = ("choice", "uniform", "loguniform", "randint")
+Distribution = Literal["choice", "grid", "uniform", "loguniform", "randint"]
+DISTRIBUTIONS: tuple[Distribution, ...] = ("choice", "grid", "uniform", "loguniform", "randint")
 TASK_FAMILY_OPTIONS = ("max_episode_steps",)
 """``TrainConfig`` fields that shape the task family's episodes."""
 MAX_CHOICES = 100
@@ -47,7 +50,7 @@ class Dimension:
     name: str
     distribution: Distribution
     values: tuple[Any, ...]
-    """choice: the options; uniform and loguniform: (low, high); randint: (low, high), both included."""
+    """choice and grid: the options; uniform and loguniform: (low, high); randint: (low, high), both included."""
 
     @property
     def key(self) -> str:
@@ -65,6 +68,8 @@ class Dimension:
 
         if self.distribution == "choice":
             return tune.choice(list(self.values))
+        if self.distribution == "grid":
+            return tune.grid_search(list(self.values))
         if self.distribution == "uniform":
             return tune.uniform(*self.values)
         if self.distribution == "loguniform":
@@ -81,6 +86,11 @@ class SearchSpace:
     def param_space(self) -> dict[str, Any]:
         """The space as Tune samples it: one flat key per setting."""
         return {dimension.key: dimension.to_tune() for dimension in self.dimensions}
+
+    @property
+    def grid_size(self) -> int:
+        """Trials each sample becomes: the product of the grids' lengths (1 without a grid)."""
+        return math.prod(len(dimension.values) for dimension in self.dimensions if dimension.distribution == "grid")
 
 
 def apply_settings(base: TrainConfig, settings: Mapping[str, Any]) -> TrainConfig:
@@ -192,9 +202,9 @@ def _dimension(name: str, spec: Any, teacher: str) -> Dimension:
 
 
 def _values(name: str, distribution: Distribution, values: Any) -> tuple[Any, ...]:
-    if distribution == "choice":
+    if distribution == "choice" or distribution == "grid":
         if not isinstance(values, list) or not 1 <= len(values) <= MAX_CHOICES:
-            raise SearchSpaceError(f"{name}: choice takes a list of 1 to {MAX_CHOICES} values, got {values!r}")
+            raise SearchSpaceError(f"{name}: {distribution} takes a list of 1 to {MAX_CHOICES} values, got {values!r}")
         return tuple(tuple(value) if isinstance(value, list) else value for value in values)
     numbers = isinstance(values, list) and len(values) == 2 and all(_is_number(value) for value in values)
     if not numbers or not values[0] < values[1]:

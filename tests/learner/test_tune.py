@@ -210,12 +210,45 @@ def test_a_trial_that_raises_is_recorded_failed_and_the_tune_goes_on(tmp_path):
         ({"learning_rate": {"loguniform": [0, 1e-3]}}, "learning_rate: loguniform needs low > 0"),
         ({"learning_rate": {"normal": [0, 1]}}, "learning_rate: unknown distribution 'normal'"),
         ({"teacher.gamma": {"choice": [0.5]}}, "teacher.gamma: no such setting; known parameters of alp-gmm"),
+        ({"gamma": {"grid": [0.9, 1.5]}}, "gamma: cannot be 1.5: gamma must be in [0, 1]"),
+        ({"gamma": {"grid": []}}, "gamma: grid takes a list of 1 to 100 values"),
     ],
 )
 def test_a_bad_search_space_names_the_setting(space, message):
     with pytest.raises(SearchSpaceError) as refused:
         parse_search_space(space, "alp-gmm")
     assert message in str(refused.value)
+
+
+def test_a_grid_runs_each_value_once_per_sample():
+    space = parse_search_space(
+        {
+            "lr_final_fraction": {"grid": [0.0, 0.3]},
+            "state_dependent_std": {"grid": [False, True]},
+            "learning_rate": {"loguniform": [1e-4, 1e-3]},
+        },
+        "currot",
+    )
+    assert space.grid_size == 4
+    tune_space = space.param_space()
+    assert tune_space["ppo.lr_final_fraction"] == {"grid_search": [0.0, 0.3]}
+    assert tune_space["ppo.state_dependent_std"] == {"grid_search": [False, True]}
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--trials", "600"], "600 trials × 2 grid points is more than 1000 trials"),
+        (["--total-steps", "4096", "--grace-steps", "8192"], "--grace-steps 8192 is beyond --total-steps 4096"),
+    ],
+)
+def test_an_unbounded_or_impossible_schedule_is_refused_before_anything_trains(tmp_path, capsys, flags, message):
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps({"fit_rate": {"grid": [100, 250]}}), encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["tune", "--search-space", str(space), "--out", str(out), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_a_refused_search_space_stops_the_command_before_anything_trains(tmp_path, capsys):
