@@ -22,6 +22,8 @@ from learner.config import TrainConfig
 SETTINGS = ("teacher", "env", "workers", "envs_per_worker", "max_episode_steps", "loop")
 """``TrainConfig`` fields a settings file may set."""
 NOTES_KEY = "tune"
+KNOWN_KEYS = (*SETTINGS, "ppo", "teacher_params", NOTES_KEY)
+"""Every key a settings file may hold, in the order an error lists them."""
 
 
 @dataclass(frozen=True)
@@ -58,11 +60,10 @@ def read_config_file(path: Path) -> ConfigFile:
         raise ValueError(f"the settings file {path} is not valid JSON: {error}") from None
     if not isinstance(data, dict):
         raise ValueError(f"the settings file {path} must hold a JSON object")
-    unknown = sorted(set(data) - {*SETTINGS, "ppo", "teacher_params", NOTES_KEY})
+    unknown = sorted(set(data) - set(KNOWN_KEYS))
     if unknown:
         raise ValueError(
-            f"the settings file {path} has unknown key(s) {', '.join(unknown)}; "
-            f"known: {', '.join((*SETTINGS, 'ppo', 'teacher_params', NOTES_KEY))}"
+            f"the settings file {path} has unknown key(s) {', '.join(unknown)}; known: {', '.join(KNOWN_KEYS)}"
         )
     for key in ("ppo", "teacher_params"):
         if not isinstance(data.get(key, {}), dict):
