@@ -21,7 +21,7 @@ from ray.tune import Callback
 from learner.config_file import NOTES_KEY
 from learner.json_file import write_json
 from learner.run_archive import metrics_records
-from learner.tune_space import SearchSpace
+from learner.tune_space import SearchSpace, grouped_settings, python_value
 
 if TYPE_CHECKING:
     from learner.tune import TuneSettings
@@ -120,7 +120,7 @@ def _entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dic
     return {
         "trial": trial.trial_id,
         "status": status,
-        "config": {key: _plain(value) for key, value in trial.config.items()},
+        "config": {key: _json_value(value) for key, value in trial.config.items()},
         "final": curve[-1] if curve else None,
         "best": best,
         "error": _error(trial) if status == FAILED else None,
@@ -129,8 +129,8 @@ def _entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dic
     }
 
 
-def _plain(value: Any) -> Any:
-    value = value.item() if hasattr(value, "item") else value
+def _json_value(value: Any) -> Any:
+    value = python_value(value)
     return list(value) if isinstance(value, tuple) else value
 
 
@@ -144,12 +144,10 @@ def best_settings(entry: dict[str, Any], settings: TuneSettings, metric_value: f
         "ppo": dict(settings.ppo),
         "teacher_params": dict(settings.teacher_params),
     }
-    for key, value in entry["config"].items():
-        target, _, name = key.partition(".")
-        if target == "env":
-            chosen[name] = value
-        else:
-            chosen["ppo" if target == "ppo" else "teacher_params"][name] = value
+    grouped = grouped_settings(entry["config"])
+    chosen.update(grouped["env"])
+    chosen["ppo"].update(grouped["ppo"])
+    chosen["teacher_params"].update(grouped["teacher"])
     chosen[NOTES_KEY] = {
         "trial": entry["trial"],
         "metric": settings.metric,

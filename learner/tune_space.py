@@ -95,14 +95,20 @@ class SearchSpace:
 
 def apply_settings(base: TrainConfig, settings: Mapping[str, Any]) -> TrainConfig:
     """``base`` with ``{"ppo.NAME": v, "teacher.NAME": v, "env.NAME": v}`` on top (``ValueError`` if one is bad)."""
-    grouped: dict[str, dict[str, Any]] = {"ppo": {}, "teacher": {}, "env": {}}
-    for key, value in settings.items():
-        target, _, name = key.partition(".")
-        grouped[target][name] = _plain(value)
+    grouped = grouped_settings(settings)
     return ConfigFile(grouped["env"], grouped["ppo"], grouped["teacher"]).applied_to(base)
 
 
-def _plain(value: Any) -> Any:
+def grouped_settings(settings: Mapping[str, Any]) -> dict[Target, dict[str, Any]]:
+    """A trial's ``{"ppo.NAME": v, "teacher.NAME": v, "env.NAME": v}`` grouped by where each goes."""
+    grouped: dict[Target, dict[str, Any]] = {"ppo": {}, "teacher": {}, "env": {}}
+    for key, value in settings.items():
+        target, _, name = key.partition(".")
+        grouped[target][name] = python_value(value)  # type: ignore[index]  # keys are Dimension.key
+    return grouped
+
+
+def python_value(value: Any) -> Any:
     """Tune draws numpy numbers; the configs and JSON take Python ones."""
     return value.item() if hasattr(value, "item") else value
 
