@@ -60,6 +60,8 @@ class EvaluationResult:
     """The environment the episodes were played in; ``task`` is a point of its task space."""
     diagnostics: tuple[EpisodeDiagnostics, ...] = ()
     """Per episode, in the same order; empty for results written before episodes recorded them."""
+    max_episode_steps: int | None = None
+    """The episodes' step limit; None for results written before it was recorded."""
 
     @property
     def returns(self) -> Interval:
@@ -100,6 +102,7 @@ class EvaluationResult:
             "task": self.task,
             "seed": self.seed,
             "episodes": len(self.episodes),
+            **({"max_episode_steps": self.max_episode_steps} if self.max_episode_steps is not None else {}),
             "confidence": CONFIDENCE,
             "return": self.returns.to_dict(),
             "success_rate": self.success_rate.to_dict(),
@@ -137,7 +140,15 @@ class EvaluationResult:
             if all(name in per_episode for name in DIAGNOSTICS_COLUMNS)
             else ()
         )
-        return cls(task=task, seed=int(data["seed"]), episodes=episodes, env=env, diagnostics=diagnostics)
+        limit = data.get("max_episode_steps")
+        return cls(
+            task=task,
+            seed=int(data["seed"]),
+            episodes=episodes,
+            env=env,
+            diagnostics=diagnostics,
+            max_episode_steps=None if limit is None else int(limit),
+        )
 
 
 def available_cpus() -> int:
@@ -238,6 +249,7 @@ def evaluate_policy(
         episodes=tuple(stats for stats, _ in played),
         env=env_id,
         diagnostics=tuple(diagnostics for _, diagnostics in played),
+        max_episode_steps=max_episode_steps,
     )
 
 
@@ -273,12 +285,19 @@ def scripted_evaluation(
     max_episode_steps: int = 1000,
 ) -> EvaluationResult:
     """The scripted controller on ``env_id``'s hardest task, the yardstick beside a bake-off's policies,
-    read from ``cache`` when it holds the same episodes and written there when not."""
+    read from ``cache`` when it holds the same episodes (environment, task, seeds and step limit) and
+    written there when not."""
+    task = task_space_for(env_id).hardest()
     if cache.exists():
         cached = EvaluationResult.from_dict(json.loads(cache.read_text(encoding="utf-8")))
-        if (cached.env, cached.seed, len(cached.episodes)) == (env_id, seed, episodes) and cached.diagnostics:
+        played = (cached.env, cached.task, cached.seed, len(cached.episodes), cached.max_episode_steps)
+        if played == (env_id, task, seed, episodes, max_episode_steps) and cached.diagnostics:
             return cached
-    task = task_space_for(env_id).hardest()
     result = evaluate_policy(None, task, episodes, seed, processes, max_episode_steps, env_id=env_id)
-    write_json(cache, {"controller": "scripted", **result.to_dict()})
+    write_json(cache, scripted_record(result))
     return result
+
+
+def scripted_record(result: EvaluationResult) -> dict[str, Any]:
+    """The scripted controller's result as written to JSON, marked as the controller's."""
+    return {"controller": "scripted", **result.to_dict()}

@@ -18,7 +18,13 @@ from common.kuka import ENV_IDS, HARD_V1_ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError, positive_int
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
-from learner.checkpoint_evaluation import EvaluationResult, available_cpus, evaluate_checkpoint, evaluate_policy
+from learner.checkpoint_evaluation import (
+    EvaluationResult,
+    available_cpus,
+    evaluate_checkpoint,
+    evaluate_policy,
+    scripted_record,
+)
 from learner.episode_diagnostics import success_by_band
 from learner.json_file import write_json
 
@@ -96,7 +102,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
         print(f"scripted controller: {scripted.summary()}\n{placement_line(scripted)}")
         if args.json is not None:
-            write_json(args.json, {"controller": "scripted", **scripted.to_dict()})
+            write_json(args.json, scripted_record(scripted))
         return 0
 
     checkpoint = read_checkpoint(args.checkpoint)
@@ -117,7 +123,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             None, task, args.episodes, args.seed, args.processes, steps, env_id=checkpoint.config.env
         )
         print(f"scripted controller, the same episodes: {scripted.summary()}\n{placement_line(scripted)}")
-        record["scripted"] = {"controller": "scripted", **scripted.to_dict()}
+        record["scripted"] = scripted_record(scripted)
     if args.json is not None:
         write_json(args.json, {**record, **result.to_dict()})
     return 0

@@ -19,7 +19,7 @@ from common.policy.actor_critic import InferencePolicy
 from kuka_curriculum import main
 from learner.checkpoint import load_checkpoint
 from learner.checkpoint_arguments import parse_task
-from learner.checkpoint_evaluation import EvaluationResult, describe_task, evaluate_policy
+from learner.checkpoint_evaluation import EvaluationResult, describe_task, evaluate_policy, scripted_evaluation
 from learner.episode_diagnostics import success_by_band
 from learner.kuka_policy import policy_snapshot
 from learner.stats import mean_interval, wilson_interval
@@ -168,6 +168,20 @@ def test_each_episode_records_where_its_block_lay_and_the_scripted_controller_pl
     assert "give a CHECKPOINT, or --scripted" in capsys.readouterr().err
     assert main(["evaluate", str(hard), "--env", HARD_ENV_ID]) == 2
     assert f"the checkpoint was trained on {HARD_V1_ENV_ID}" in capsys.readouterr().err
+
+
+def test_the_cached_scripted_controller_is_reused_only_for_the_same_episodes(tmp_path):
+    cache = tmp_path / "scripted_evaluation.json"
+    first = scripted_evaluation(cache, HARD_V1_ENV_ID, episodes=2, seed=7, processes=1, max_episode_steps=40)
+    assert first.max_episode_steps == 40 and json.loads(cache.read_text())["controller"] == "scripted"
+    written = cache.stat().st_mtime_ns
+    assert scripted_evaluation(cache, HARD_V1_ENV_ID, episodes=2, seed=7, processes=1, max_episode_steps=40) == first
+    assert cache.stat().st_mtime_ns == written
+    # Another step limit plays the episodes again: a cut-short episode is not the one a longer limit plays.
+    longer = scripted_evaluation(cache, HARD_V1_ENV_ID, episodes=2, seed=7, processes=1, max_episode_steps=60)
+    assert longer.max_episode_steps == 60 and cache.stat().st_mtime_ns != written
+    assert [episode.length for episode in first.episodes] == [40, 40]
+    assert all(episode.length > 40 for episode in longer.episodes)
 
 
 def test_task_strings():
