@@ -16,7 +16,6 @@ touches the network. The hook also serves the repository's ``benchmarks/`` files
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import inspect
 import io
@@ -98,23 +97,6 @@ def _cell(text: Any) -> str:
     return " ".join(str(text).split()).replace("|", "\\|")
 
 
-def _attribute_docs(cls: type) -> dict[str, str]:
-    """The docstrings written under a class's attributes (the settings document themselves that way)."""
-    tree = ast.parse(inspect.getsource(cls))
-    body = tree.body[0].body if isinstance(tree.body[0], ast.ClassDef) else []
-    docs: dict[str, str] = {}
-    for statement, following in zip(body, body[1:], strict=False):
-        if (
-            isinstance(statement, ast.AnnAssign)
-            and isinstance(statement.target, ast.Name)
-            and isinstance(following, ast.Expr)
-            and isinstance(following.value, ast.Constant)
-            and isinstance(following.value.value, str)
-        ):
-            docs[statement.target.id] = inspect.cleandoc(following.value.value)
-    return docs
-
-
 def _number(value: Any) -> str:
     """A bound as a person writes it: 2, not 2.0 (JSON schemas write integer bounds as floats)."""
     return str(int(value)) if isinstance(value, float) and value.is_integer() else str(value)
@@ -152,14 +134,13 @@ def _bounds(metadata: list[Any]) -> str:
 def _settings() -> str:
     from teacher_service.core.config import Settings
 
-    docs = _attribute_docs(Settings)
     prefix = Settings.model_config.get("env_prefix", "")
     rows = ["| variable | default | bounds | what it does |", "|---|---|---|---|"]
     for name, field in Settings.model_fields.items():
         default = "none" if field.default is None else f"`{field.default}`"
         choices = get_args(field.annotation) if get_origin(field.annotation) is Literal else ()
         bounds = _bounds(field.metadata) or (("one of " + ", ".join(f"`{c}`" for c in choices)) if choices else "")
-        rows.append(f"| `{prefix}{name.upper()}` | {default} | {_cell(bounds)} | {_cell(docs.get(name, ''))} |")
+        rows.append(f"| `{prefix}{name.upper()}` | {default} | {_cell(bounds)} | {_cell(field.description or '')} |")
     return "\n".join(rows)
 
 

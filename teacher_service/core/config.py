@@ -16,7 +16,9 @@ ANY_HOST = "*"
 
 
 class Settings(BaseSettings):
-    model_config = SettingsConfigDict(env_prefix="KC_", extra="ignore", hide_input_in_errors=True)
+    model_config = SettingsConfigDict(
+        env_prefix="KC_", extra="ignore", hide_input_in_errors=True, use_attribute_docstrings=True
+    )
     """Inputs stay out of error messages: one of them may be the token."""
 
     host: str = "127.0.0.1"
