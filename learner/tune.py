@@ -386,7 +386,7 @@ def _fit(settings: TuneSettings, space: SearchSpace, setup: TrialSetup, out: Pat
                 storage_path=str(out),
                 failure_config=tune.FailureConfig(max_failures=0, fail_fast=False),
                 verbose=0,
-                callbacks=[TuneProgress(settings.metric, settings.trials * space.grid_size)],
+                callbacks=[TuneProgress(settings.metric, settings.trials * space.grid_size, settings.total_steps)],
             ),
         )
     tuner.fit()

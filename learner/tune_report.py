@@ -32,15 +32,23 @@ CURVES_FILE = "curves.png"
 FINISHED, STOPPED, FAILED, UNFINISHED = "finished", "stopped early", "failed", "unfinished"
 
 
-class TuneProgress(Callback):
-    """Prints a status line whenever the picture changes: trials by state, and the best so far."""
+PROGRESS_EVERY_S = 60.0
+"""The longest a running tune stays silent."""
 
-    def __init__(self, metric: str, trials: int) -> None:
+
+class TuneProgress(Callback):
+    """Prints a status line whenever the picture changes (trials by state, the best so far), and
+    at least every ``PROGRESS_EVERY_S`` while trials train, with the steps trained of the whole tune."""
+
+    def __init__(self, metric: str, trials: int, total_steps: int) -> None:
         self.metric = metric
         self.trials = trials
+        self.total_steps = total_steps
         self.started = time.monotonic()
         self.best: tuple[float, str, float] | None = None
+        self.steps: dict[str, float] = {}
         self.last_line = ""
+        self.last_printed = self.started
 
     def on_trial_start(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
         self._print(trials, starting=trial)  # Tune calls this before it marks the trial running
@@ -51,6 +59,7 @@ class TuneProgress(Callback):
         value = result.get(self.metric)
         if isinstance(value, (int, float)) and not math.isnan(value) and (self.best is None or value > self.best[0]):
             self.best = (float(value), trial.trial_id, float(result.get("steps", 0)))
+        self.steps[trial.trial_id] = float(result.get("steps", 0))
         self._print(trials)
 
     def on_trial_complete(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
@@ -69,9 +78,11 @@ class TuneProgress(Callback):
             f"{counts['RUNNING']} running, {counts['PENDING']} pending, {done} finished, {counts['ERROR']} failed "
             f"of {self.trials} | best {self.metric} so far: {best}"
         )
-        if line != self.last_line:
-            self.last_line = line
-            print(f"[tune {time.monotonic() - self.started:6.0f}s] {line}", flush=True)
+        now = time.monotonic()
+        if line != self.last_line or now - self.last_printed >= PROGRESS_EVERY_S:
+            self.last_line, self.last_printed = line, now
+            steps = f"{sum(self.steps.values()):_.0f} of at most {self.trials * self.total_steps:_} steps trained"
+            print(f"[tune {now - self.started:6.0f}s] {line} | {steps}", flush=True)
 
 
 @dataclass(frozen=True)

@@ -293,3 +293,24 @@ def test_a_settings_file_with_an_unknown_key_is_refused_by_name(tmp_path, capsys
     assert main(["train", "--config", str(settings), "--run-dir", str(tmp_path / "run")]) == 2
     assert "unknown key(s) learning_rate" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_the_progress_line_shows_trial_states_the_best_and_the_steps_trained(capsys, monkeypatch):
+    from types import SimpleNamespace
+
+    from learner import tune_report
+
+    clock = [100.0]
+    monkeypatch.setattr(tune_report.time, "monotonic", lambda: clock[0])
+    progress = tune_report.TuneProgress("success", trials=2, total_steps=1000)
+    first, second = SimpleNamespace(trial_id="a", status="RUNNING"), SimpleNamespace(trial_id="b", status="PENDING")
+    progress.on_trial_result(0, [first, second], first, {"success": 0.25, "steps": 300.0})
+    assert capsys.readouterr().out.strip() == (
+        "[tune      0s] 1 running, 1 pending, 0 finished, 0 failed of 2 | best success so far: 0.25 (a at 300 steps)"
+        " | 300 of at most 2_000 steps trained"
+    )
+    progress.on_trial_result(0, [first, second], first, {"success": 0.0, "steps": 400.0})
+    assert capsys.readouterr().out == "", "nothing new to say, and not a minute since the last line"
+    clock[0] += tune_report.PROGRESS_EVERY_S
+    progress.on_trial_result(0, [first, second], first, {"success": 0.0, "steps": 500.0})
+    assert capsys.readouterr().out.strip().endswith("| 500 of at most 2_000 steps trained")
