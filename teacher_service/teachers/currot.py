@@ -46,6 +46,13 @@ Where ours departs from the authors', and what it costs or gains:
   of the diagonal, a radius of 27% of a unit square's diagonal); give the radius you want.
 - The movement's assignment is exact (``scipy.optimize.linear_sum_assignment``) where the authors
   use sliced Wasserstein; the estimate averages the 32 nearest buffered results at each point.
+- ``estimate`` = recent (not the default): the estimate is fitted to the last ``recent_results``
+  results instead of the success buffer and the kept failures. The lasting buffer keeps successes
+  from before a student's success rate fell, and on KukaGraspHard-v1 (issue 44) it held the
+  estimate at 0.5 to 0.7 at the hardest point while the student succeeded there 10 to 17% of the
+  time. The buffer still supplies the replacement samples, but a particle below the bar takes only
+  a sample estimated at or above it: when fewer samples are, the assignment gives them to the
+  particles nearest them and the rest stay, to move to the best candidate of their full ball.
 - Until the particles' estimate first reaches the bar, failures are not kept (as the authors'), but
   the decision is taken from the update installed when a new one falls due: a service that installs
   updates late (the replay never does) can keep its first failures one update later.
@@ -94,7 +101,11 @@ MAX_PARTICLES = 500
 MAX_BUFFER = 2000
 MAX_CANDIDATES = 128
 """Together these bound one update: at most 500 x 128 points estimated from their nearest among
-2,500 buffered results, and assignments of at most 500 particles to at most 2,500 tasks."""
+2,500 buffered results (or 2,000 recent ones), and assignments of at most 500 particles to at most
+2,500 tasks."""
+
+DEFAULT_RECENT = 400
+"""Results the estimate is fitted to with ``estimate`` = recent, unless ``recent_results`` says."""
 
 LENGTHSCALE_SHARE = 0.3
 """The performance model's kernel length scale as a share of the move radius (the authors' choice)."""
@@ -174,10 +185,22 @@ class CurrotParams(TeacherParams):
     distances: Literal["unit", "raw"] = "unit"
     """Distances measured in the box rescaled to [0, 1] per dimension, or in the task's own units
     (the authors')."""
+    estimate: Literal["buffers", "recent"] = "buffers"
+    """What the performance estimate is fitted to. "buffers": the success buffer and the recent
+    failures (the authors'). "recent": the last ``recent_results`` results only, successes and
+    failures alike, as they came, so a student whose success rate at a place is below the bar is
+    estimated below it there, whatever successes the buffer still holds from before; a particle
+    below the bar is then replaced only by a sample estimated at or above it (see the module
+    docstring)."""
+    recent_results: int = Field(default=DEFAULT_RECENT, ge=1, le=MAX_BUFFER)
+    """With ``estimate`` = recent (and only then): how many of the latest results the estimate is
+    fitted to."""
 
     @model_validator(mode="after")
     def _consistent(self) -> CurrotParams:
         check_target_box(self.target, self.target_box)
+        if self.estimate != "recent" and self.recent_results != DEFAULT_RECENT:
+            raise ValueError(f"recent_results is read only with estimate 'recent', not {self.estimate!r}")
         return self
 
 
@@ -203,7 +226,9 @@ class FitInputs:
     """What one update starts from, fixed when it falls due: the particles (unit coordinates), the
     success buffer and the kept failures (rows of unit task and performance), the bar (``None``:
     no bar yet), the lowest performance of the first results, and the two flags of the authors'
-    code: the buffer's median has exceeded the bar; the particles' estimate has reached it."""
+    code: the buffer's median has exceeded the bar; the particles' estimate has reached it. With
+    ``estimate`` = recent, ``window`` holds the latest results (rows as the buffers') the estimate
+    is fitted to instead of the buffers; ``None``: the buffers'."""
 
     particles: np.ndarray
     successes: np.ndarray
@@ -213,6 +238,7 @@ class FitInputs:
     floor: float
     buffer_reached: bool
     threshold_reached: bool
+    window: np.ndarray | None = None
 
     def export(self) -> dict[str, Any]:
         return {
@@ -224,6 +250,7 @@ class FitInputs:
             "floor": self.floor,
             "buffer_reached": self.buffer_reached,
             "threshold_reached": self.threshold_reached,
+            **({} if self.window is None else {"window": self.window.tolist()}),
         }
 
     @classmethod
@@ -240,6 +267,7 @@ class FitInputs:
             float(data["floor"]),
             bool(data["buffer_reached"]),
             bool(data["threshold_reached"]),
+            rows("window", dims + 1) if "window" in data else None,
         )
 
 
@@ -414,7 +442,7 @@ def move_particles(
     rng = np.random.Generator(np.random.PCG64(random_state))
     n, dims = inputs.particles.shape
     bar = math.inf if inputs.bar is None else inputs.bar
-    known = np.concatenate([inputs.failures, inputs.successes])
+    known = np.concatenate([inputs.failures, inputs.successes]) if inputs.window is None else inputs.window
     estimate = functools.partial(estimate_performance, known[:, :-1] * scale, known[:, -1], LENGTHSCALE_SHARE * radius)
     particles = inputs.particles * scale
     here = estimate(particles)
@@ -425,9 +453,11 @@ def move_particles(
     if replaced.any():
         samples = resample_successes(rng, inputs, n, scale, MIN_NOISE_SHARE * radius**2) * scale
         valid = estimate(samples) >= bar
-        if valid.sum() >= replaced.sum():
+        if valid.sum() >= replaced.sum() or inputs.window is not None:
             samples, valid = samples[valid], valid[valid]
-        _, picked = linear_sum_assignment(squared_distances(particles[replaced], samples))
+        # every particle below the bar is assigned a sample, unless (with a window) too few are valid
+        assigned, picked = linear_sum_assignment(squared_distances(particles[replaced], samples))
+        replaced[replaced] = np.isin(np.arange(replaced.sum()), assigned)
         if walk:
             heading = samples[picked] - particles[replaced]
             length = np.linalg.norm(heading, axis=-1, keepdims=True)
@@ -495,6 +525,8 @@ class CurrotTeacher(Teacher):
         self._successes = np.empty((0, dims + 2))
         """The success buffer: unit task, reward, success (``UNKNOWN_SUCCESS`` when not reported)."""
         self._failures = np.empty((0, dims + 2))
+        self._window = np.empty((0, dims + 2))
+        """With ``estimate`` = recent: the latest ``recent_results`` results, rows as the log's."""
         self._buffer_reached = False
         self._threshold_reached = False
         self._floor: list[float] | None = None
@@ -576,6 +608,8 @@ class CurrotTeacher(Teacher):
         self._successes = successes[:, :-1]
         if self._threshold_reached:
             self._failures = np.concatenate([self._failures, batch[failed]])[-self.failures_kept :]
+        if self.params.estimate == "recent":
+            self._window = np.concatenate([self._window, batch])[-self.params.recent_results :]
         keep = [*range(dims), dims + 2 + column]
         return FitInputs(
             self._particles,
@@ -586,6 +620,7 @@ class CurrotTeacher(Teacher):
             self._floor[1 if measure == "success" else 0],
             self._buffer_reached,
             self._threshold_reached,
+            self._window[:, keep] if self.params.estimate == "recent" else None,
         )
 
     def _target_samples(self, index: int) -> np.ndarray:
@@ -684,6 +719,7 @@ class CurrotTeacher(Teacher):
             "pending": [[index, inputs.export()] for index, inputs in self._pending.items()],
             "successes": self._successes.tolist(),
             "failures": self._failures.tolist(),
+            **({"window": self._window.tolist()} if self.params.estimate == "recent" else {}),
             "buffer_reached": self._buffer_reached,
             "threshold_reached": self._threshold_reached,
             "floor": self._floor,
@@ -704,6 +740,8 @@ class CurrotTeacher(Teacher):
         self._pending = {int(index): FitInputs.load(inputs, dims) for index, inputs in state["pending"]}
         self._successes = np.array(state["successes"], dtype=np.float64).reshape(-1, dims + 2)
         self._failures = np.array(state["failures"], dtype=np.float64).reshape(-1, dims + 2)
+        window = state["window"] if self.params.estimate == "recent" else []
+        self._window = np.array(window, dtype=np.float64).reshape(-1, dims + 2)
         self._buffer_reached = bool(state["buffer_reached"])
         self._threshold_reached = bool(state["threshold_reached"])
         self._floor = None if state["floor"] is None else [float(value) for value in state["floor"]]
@@ -744,6 +782,7 @@ class CurrotTeacher(Teacher):
             },
             "success_buffer": len(self._successes),
             "failures_kept": len(self._failures),
+            **({"recent_window": len(self._window)} if self.params.estimate == "recent" else {}),
             "threshold_reached": self._threshold_reached,
             "target": self._target_view(),
             "fits": self.fits_installed,
