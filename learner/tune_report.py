@@ -120,7 +120,8 @@ def _entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dic
     run_dir = runs_dir / trial.trial_id
     curve = evaluation_curve(run_dir)
     last = trial.last_result or {}
-    steps = int(curve[-1]["steps"]) if curve else 0
+    # The steps trained, which the last result reports: the last evaluation may come iterations before the end.
+    steps = int(last.get("steps") or (curve[-1]["steps"] if curve else 0))
     if trial.status == "ERROR":
         status = FAILED
     elif trial.status == "TERMINATED" and last.get("done"):

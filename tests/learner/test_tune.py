@@ -314,3 +314,23 @@ def test_the_progress_line_shows_trial_states_the_best_and_the_steps_trained(cap
     clock[0] += tune_report.PROGRESS_EVERY_S
     progress.on_trial_result(0, [first, second], first, {"success": 0.0, "steps": 500.0})
     assert capsys.readouterr().out.strip().endswith("| 500 of at most 2_000 steps trained")
+
+
+def test_a_trial_that_trained_its_budget_is_finished_though_its_last_evaluation_came_earlier(tmp_path):
+    from types import SimpleNamespace
+
+    from learner.tune import TuneSettings
+    from learner.tune_report import FINISHED, _entry
+
+    run_dir = tmp_path / "runs" / "t0"
+    run_dir.mkdir(parents=True)
+    records = [
+        {"step": 4096, "eval/success_rate": 0.5, "eval/return": 1.0},
+        {"step": 8192, "eval/success_rate": None},
+    ]
+    (run_dir / "metrics.jsonl").write_text("".join(json.dumps(record) + "\n" for record in records), encoding="utf-8")
+    trial = SimpleNamespace(
+        trial_id="t0", status="TERMINATED", last_result={"done": True, "steps": 8192.0}, config={}, error_file=None
+    )
+    entry = _entry(trial, TuneSettings(search_space={}, total_steps=8000), tmp_path / "runs", tmp_path)
+    assert entry["status"] == FINISHED and entry["final"]["steps"] == 4096
