@@ -196,12 +196,13 @@ def _train(args: argparse.Namespace) -> int:
         _check_reachable(args.ray_address)
 
     with contextlib.ExitStack() as stack:
-        teacher_ready = launch_teacher(args.teacher_url, run_dir, stack)
-        connect_ray(args.ray_address, config.workers, stack)
-        teacher_url = teacher_ready()
+        # The curriculum is registered before Ray starts, so parameters the teacher refuses stop the
+        # command at once; a tune, which registers in each trial, starts Ray while its service starts.
+        teacher_url = launch_teacher(args.teacher_url, run_dir, stack)()
         name = curriculum_name(run_dir)
         _register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
+        connect_ray(args.ray_address, config.workers, stack)
         return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
 
 
