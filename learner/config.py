@@ -67,6 +67,8 @@ class PPOConfig:
     """Floor of the log-std (None = none); -2.3 keeps std >= 0.1 on actions in [-1, 1]."""
     angle_features: bool = True
     """Feed observed angles to the networks as (sin, cos): the gripper's roll wraps at +-pi every few steps."""
+    world_block_offset: bool = False
+    """Also feed the networks the block's offset from the gripper in the world frame, the frame actions move in."""
     obs_clip: float = 10.0
     """Normalised observations are clipped to +-this."""
     torch_threads: int = 1

@@ -3,11 +3,15 @@ a checkpoint holds."""
 
 from __future__ import annotations
 
-from common.kuka.env import KukaGraspEnv
+from common.kuka.env import BLOCK_XY_IN_GRIPPER, GRIPPER_EULER_INDICES, KukaGraspEnv
 from common.policy.actor_critic import PolicySnapshot, PolicySpec
+from common.policy.inference import WorldOffset
 from learner.checkpoint import Checkpoint
 from learner.config import PPOConfig
 from learner.ppo import PPOLearner
+
+BLOCK_OFFSET = WorldOffset(BLOCK_XY_IN_GRIPPER.start, BLOCK_XY_IN_GRIPPER.start + 1, GRIPPER_EULER_INDICES)
+"""The block's (x, y) in the gripper's frame, which ``PPOConfig.world_block_offset`` turns into the world's."""
 
 
 def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
@@ -21,6 +25,7 @@ def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
             state_dependent_std=ppo.state_dependent_std,
             min_log_std=ppo.min_log_std,
             angle_indices=probe.angle_indices if ppo.angle_features else (),
+            world_offsets=(BLOCK_OFFSET,) if ppo.world_block_offset else (),
         )
     finally:
         probe.close()

@@ -79,6 +79,8 @@ FAR_MIN_DISTANCE = 0.16
 """A far block lies at least this far (metres) from ``FAR_CENTRE``; random actions rarely end there."""
 BLOCK_XY_IN_GRIPPER = slice(6, 8)
 """Observation entries of the block's x and y (metres) in the gripper's frame."""
+GRIPPER_EULER_INDICES = (3, 4, 5)
+"""Observation entries of the gripper's roll, pitch and yaw (radians): the frame ``BLOCK_XY_IN_GRIPPER`` is in."""
 BLOCK_YAW_INDEX = 8
 """Observation entry of the block's yaw in the gripper's frame: pi/2 (modulo pi) when the fingers,
 which close along the gripper's x, are square to the block's length."""

@@ -24,6 +24,22 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class WorldOffset:
+    """An observed planar vector given in a body's frame, and that body's observed Euler angles (roll about
+    x, then pitch about y, then yaw about z, as pybullet reports them): the networks also get the vector's
+    (x, y) in the world frame. A network that must act in the world frame on a vector it sees in a turning
+    frame otherwise has to learn the rotation, a product of inputs a small tanh MLP fits only roughly."""
+
+    x_index: int
+    y_index: int
+    euler_indices: tuple[int, int, int]
+
+    @property
+    def indices(self) -> tuple[int, ...]:
+        return (self.x_index, self.y_index, *self.euler_indices)
+
+
+@dataclass(frozen=True)
 class PolicySpec:
     """Everything needed to rebuild the network's shape on another process."""
 
@@ -37,6 +53,8 @@ class PolicySpec:
     """The actor's head outputs the log-std per state (clamped to ``LOG_STD_BOUNDS``) beside the mean."""
     min_log_std: float | None = None
     """Floor of the log-std (None = none beyond ``LOG_STD_BOUNDS`` for a state-dependent one)."""
+    world_offsets: tuple[WorldOffset, ...] = ()
+    """Observed vectors whose world-frame (x, y) the networks also see, after the other features."""
 
     def __post_init__(self) -> None:
         if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
@@ -48,11 +66,18 @@ class PolicySpec:
             raise ValueError(
                 f"angle_indices must be distinct observation indices below {self.obs_dim}, got {self.angle_indices}"
             )
+        for offset in self.world_offsets:
+            if len(set(offset.indices)) != len(offset.indices) or not all(
+                0 <= index < self.obs_dim for index in offset.indices
+            ):
+                raise ValueError(
+                    f"a world offset must name 5 distinct observation indices below {self.obs_dim}, got {offset}"
+                )
 
     @property
     def feature_dim(self) -> int:
-        """Width of the networks' input: every angle becomes two features."""
-        return self.obs_dim + len(self.angle_indices)
+        """Width of the networks' input: every angle becomes two features, every world offset adds two."""
+        return self.obs_dim + len(self.angle_indices) + 2 * len(self.world_offsets)
 
     @property
     def log_std_range(self) -> tuple[float, float]:
@@ -62,7 +87,8 @@ class PolicySpec:
 
 
 class ObservationFeatures:
-    """Raw observations to network inputs: angles as (sin, cos), everything else unchanged.
+    """Raw observations to network inputs: angles as (sin, cos), everything else unchanged, then each
+    of the spec's world offsets as its world-frame (x, y).
 
     An angle near +-pi (the gripper's roll, pointing down, flips sign from one step to the next)
     is a jump of 2 pi to a network fed the raw number, and a normaliser turns it into noise of
@@ -73,12 +99,29 @@ class ObservationFeatures:
         angles = set(spec.angle_indices)
         self._plain = [index for index in range(spec.obs_dim) if index not in angles]
         self._angles = list(spec.angle_indices)
+        self._world_offsets = spec.world_offsets
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
-        if not self._angles:
+        if not self._angles and not self._world_offsets:
             return observations
-        angles = observations[..., self._angles]
-        return np.concatenate([observations[..., self._plain], np.sin(angles), np.cos(angles)], axis=-1)
+        parts = [observations[..., self._plain]]
+        if self._angles:
+            angles = observations[..., self._angles]
+            parts += [np.sin(angles), np.cos(angles)]
+        parts += [_in_world_frame(observations, offset) for offset in self._world_offsets]
+        return np.concatenate(parts, axis=-1)
+
+
+def _in_world_frame(observations: np.ndarray, offset: WorldOffset) -> np.ndarray:
+    """The offset's vector (x, y, 0) turned by R = Rz(yaw) Ry(pitch) Rx(roll), its world x and y: (..., 2)."""
+    x, y = observations[..., offset.x_index], observations[..., offset.y_index]
+    roll, pitch, yaw = (observations[..., index] for index in offset.euler_indices)
+    cos_pitch, sin_pitch = np.cos(pitch), np.sin(pitch)
+    cos_roll, sin_roll = np.cos(roll), np.sin(roll)
+    cos_yaw, sin_yaw = np.cos(yaw), np.sin(yaw)
+    world_x = cos_yaw * cos_pitch * x + (cos_yaw * sin_pitch * sin_roll - sin_yaw * cos_roll) * y
+    world_y = sin_yaw * cos_pitch * x + (sin_yaw * sin_pitch * sin_roll + cos_yaw * cos_roll) * y
+    return np.stack([world_x, world_y], axis=-1)
 
 
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)

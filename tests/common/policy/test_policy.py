@@ -5,7 +5,9 @@ import pytest
 import torch
 from torch import nn
 
+from common.kuka.bullet import pybullet
 from common.policy.actor_critic import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.inference import WorldOffset
 from common.policy.normalizer import RunningNormalizer
 
 
@@ -171,6 +173,40 @@ def test_an_angle_either_side_of_the_wrap_gives_nearly_the_same_features():
     assert below[0, :2] == pytest.approx([0.2, 7.0])
     assert np.abs(below - above).max() < 3e-3
     assert features(np.array([[0.0, 0.0, 0.0, np.pi / 2]]))[0, 2:] == pytest.approx([0.0, 1.0, 1.0, 0.0], abs=1e-12)
+
+
+def test_a_world_offset_is_its_vector_turned_by_the_bodys_euler_angles_as_pybullet_turns_it():
+    offset = WorldOffset(x_index=0, y_index=1, euler_indices=(2, 3, 4))
+    spec = PolicySpec(obs_dim=6, action_dim=1, angle_indices=(2, 3, 4), world_offsets=(offset,))
+    features = ObservationFeatures(spec)
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        vector, euler = rng.uniform(-0.2, 0.2, size=2), rng.uniform(-np.pi, np.pi, size=3)
+        rotation = np.array(pybullet.getMatrixFromQuaternion(pybullet.getQuaternionFromEuler(euler))).reshape(3, 3)
+        observation = np.array([[*vector, *euler, 3.0]])
+
+        inputs = features(observation)
+
+        assert inputs.shape == (1, 3 + 2 * 3 + 2)  # the 3 plain entries, (sin, cos) of 3 angles, then the offset
+        assert inputs[0, -2:] == pytest.approx((rotation @ [*vector, 0.0])[:2], abs=1e-12)
+
+
+def test_inference_matches_the_training_network_with_a_world_offset():
+    torch.manual_seed(8)
+    offset = WorldOffset(x_index=4, y_index=5, euler_indices=(0, 1, 2))
+    spec = PolicySpec(obs_dim=6, action_dim=2, hidden_sizes=(8, 8), angle_indices=(0, 1, 2), world_offsets=(offset,))
+    assert spec.feature_dim == 6 + 3 + 2
+    network = perturbed(ActorCritic(spec))
+    normalizer = fitted_normalizer(spec)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+
+@pytest.mark.parametrize(
+    "offset", [WorldOffset(0, 0, (1, 2, 3)), WorldOffset(0, 1, (2, 3, 6)), WorldOffset(-1, 1, (2, 3, 4))]
+)
+def test_a_world_offset_must_name_distinct_observation_entries(offset):
+    with pytest.raises(ValueError, match="world offset"):
+        PolicySpec(obs_dim=6, action_dim=1, world_offsets=(offset,))
 
 
 @pytest.mark.parametrize("angles", [(2, 2), (5,), (-1,)])
