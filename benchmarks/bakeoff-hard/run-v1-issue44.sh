@@ -6,8 +6,11 @@
 #
 #   setsid nohup nice -n 10 benchmarks/bakeoff-hard/run-v1-issue44.sh > runs/bakeoff-v1-issue44.log 2>&1 &
 #
-# The same student for every teacher: the defaults (the screening found no lever that helped; a learning
-# rate floor of 0.3 ended lower). CURROT as `train` registers it for KUKA (estimate=recent), from the
+# The same student for every teacher, STUDENT: world-offset (the default since 2026-11-27 17:15 UTC: the
+# networks also see the block's offset from the gripper in the world frame, `--ppo world_block_offset=true`,
+# 85% against 66% on the screening seed; BENCHMARKS "Issue 44: the student's levers") into
+# bakeoff-v1-issue44-world-offset, or default (PPO's defaults, the first runs, stopped after 2 of them) into
+# bakeoff-v1-issue44. CURROT as `train` registers it for KUKA (estimate=recent), from the
 # easiest point, heading for CURROT_TARGET (box: every parameter at its hardest but shaping free;
 # hardest: the point). Self-paced as the v1 screening chose. 6M steps a run (the issue allows 10M; the
 # v1 screening's 10M run ended lower than its 6M twin). Training seeds 0 to 4; final evaluation on 100
@@ -16,7 +19,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
-OUT=benchmarks/bakeoff-hard/bakeoff-v1-issue44
+STUDENT=${STUDENT:-world-offset}
+case "$STUDENT" in
+    world-offset) OUT=benchmarks/bakeoff-hard/bakeoff-v1-issue44-world-offset && PPO=(--ppo world_block_offset=true) ;;
+    default) OUT=benchmarks/bakeoff-hard/bakeoff-v1-issue44 && PPO=() ;;
+    *) echo "STUDENT must be world-offset or default, got $STUDENT" >&2 && exit 2 ;;
+esac
 CURROT_TARGET=${CURROT_TARGET:-box}
 TEACHERS=(fixed currot self-paced alp-gmm learnability)
 case "$CURROT_TARGET" in
@@ -28,5 +36,5 @@ for seeds in 1 2 3 4 5; do
     "$PYTHON" -m kuka_curriculum bakeoff --env KukaGraspHard-v1 --teachers "${TEACHERS[@]}" --seeds "$seeds" \
         --total-steps 6000000 --curve-episodes 20 --eval-seed 100000 --out "$OUT" \
         --teacher-param currot.start=easiest "${CURROT[@]}" \
-        --teacher-param self-paced.kl_limit=1.0 --teacher-param self-paced.update_every=50
+        --teacher-param self-paced.kl_limit=1.0 --teacher-param self-paced.update_every=50 "${PPO[@]}"
 done
