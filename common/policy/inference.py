@@ -60,19 +60,19 @@ class PolicySpec:
         if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
             low, high = LOG_STD_BOUNDS
             raise ValueError(f"min_log_std must be in [{low}, {high}), got {self.min_log_std}")
-        if len(set(self.angle_indices)) != len(self.angle_indices) or not all(
-            0 <= index < self.obs_dim for index in self.angle_indices
-        ):
+        if not self._distinct_entries(self.angle_indices):
             raise ValueError(
                 f"angle_indices must be distinct observation indices below {self.obs_dim}, got {self.angle_indices}"
             )
         for offset in self.world_offsets:
-            if len(set(offset.indices)) != len(offset.indices) or not all(
-                0 <= index < self.obs_dim for index in offset.indices
-            ):
+            if not self._distinct_entries(offset.indices):
                 raise ValueError(
                     f"a world offset must name 5 distinct observation indices below {self.obs_dim}, got {offset}"
                 )
+
+    def _distinct_entries(self, indices: tuple[int, ...]) -> bool:
+        """Whether ``indices`` name distinct entries of an observation."""
+        return len(set(indices)) == len(indices) and all(0 <= index < self.obs_dim for index in indices)
 
     @property
     def feature_dim(self) -> int:

@@ -4,7 +4,7 @@ import pytest
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.env import make_kuka_env
 from common.policy.inference import ObservationFeatures
-from learner.config import PPOConfig
+from learner.config import PPOConfig, TrainConfig
 from learner.kuka_policy import kuka_policy_spec
 
 
@@ -39,7 +39,5 @@ def test_without_the_option_the_networks_inputs_are_as_before():
 
 @pytest.mark.parametrize("value", [True, False])
 def test_the_option_survives_a_checkpoints_config_round_trip(value):
-    from learner.config import TrainConfig
-
     config = TrainConfig(ppo=PPOConfig(world_block_offset=value))
     assert TrainConfig.from_dict(config.to_dict()).ppo.world_block_offset is value
