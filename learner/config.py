@@ -69,6 +69,8 @@ class PPOConfig:
     """Feed observed angles to the networks as (sin, cos): the gripper's roll wraps at +-pi every few steps."""
     world_block_offset: bool = False
     """Also feed the networks the block's offset from the gripper in the world frame, the frame actions move in."""
+    half_turn_block_yaw: bool = False
+    """Feed the block's yaw as (sin 2a, cos 2a): a block turned half a turn is the same, so the wrist can turn less."""
     obs_clip: float = 10.0
     """Normalised observations are clipped to +-this."""
     torch_threads: int = 1
@@ -90,6 +92,7 @@ class PPOConfig:
         _require(self.max_grad_norm > 0, "max_grad_norm must be positive")
         _require(len(self.hidden_sizes) >= 1 and min(self.hidden_sizes) >= 1, "hidden_sizes must be positive widths")
         _require(self.torch_threads >= 1, "torch_threads must be at least 1")
+        _require(self.angle_features or not self.half_turn_block_yaw, "half_turn_block_yaw needs angle_features")
 
     def with_overrides(self, values: Mapping[str, Any]) -> PPOConfig:
         """This config with some fields replaced by values from the command line or JSON, checked by

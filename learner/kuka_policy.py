@@ -3,7 +3,7 @@ a checkpoint holds."""
 
 from __future__ import annotations
 
-from common.kuka.env import BLOCK_XY_IN_GRIPPER, GRIPPER_EULER_INDICES, KukaGraspEnv
+from common.kuka.env import BLOCK_XY_IN_GRIPPER, BLOCK_YAW_INDEX, GRIPPER_EULER_INDICES, KukaGraspEnv
 from common.policy.actor_critic import PolicySnapshot, PolicySpec
 from common.policy.inference import WorldOffset
 from learner.checkpoint import Checkpoint
@@ -26,6 +26,7 @@ def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
             min_log_std=ppo.min_log_std,
             angle_indices=probe.angle_indices if ppo.angle_features else (),
             world_offsets=(BLOCK_OFFSET,) if ppo.world_block_offset else (),
+            half_turn_indices=(BLOCK_YAW_INDEX,) if ppo.half_turn_block_yaw else (),
         )
     finally:
         probe.close()

@@ -55,6 +55,9 @@ class PolicySpec:
     """Floor of the log-std (None = none beyond ``LOG_STD_BOUNDS`` for a state-dependent one)."""
     world_offsets: tuple[WorldOffset, ...] = ()
     """Observed vectors whose world-frame (x, y) the networks also see, after the other features."""
+    half_turn_indices: tuple[int, ...] = ()
+    """Angles among ``angle_indices`` of something that looks the same turned half a turn (a box's yaw): the
+    networks see (sin 2a, cos 2a), so both readings of one pose are one input."""
 
     def __post_init__(self) -> None:
         if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
@@ -69,6 +72,13 @@ class PolicySpec:
                 raise ValueError(
                     f"a world offset must name 5 distinct observation indices below {self.obs_dim}, got {offset}"
                 )
+        if len(set(self.half_turn_indices)) != len(self.half_turn_indices) or not set(self.half_turn_indices).issubset(
+            self.angle_indices
+        ):
+            raise ValueError(
+                f"half_turn_indices must be distinct entries of angle_indices {self.angle_indices}, "
+                f"got {self.half_turn_indices}"
+            )
 
     def _distinct_entries(self, indices: tuple[int, ...]) -> bool:
         """Whether ``indices`` name distinct entries of an observation."""
@@ -87,8 +97,8 @@ class PolicySpec:
 
 
 class ObservationFeatures:
-    """Raw observations to network inputs: angles as (sin, cos), everything else unchanged, then each
-    of the spec's world offsets as its world-frame (x, y).
+    """Raw observations to network inputs: angles as (sin, cos) (half-turn angles doubled first),
+    everything else unchanged, then each of the spec's world offsets as its world-frame (x, y).
 
     An angle near +-pi (the gripper's roll, pointing down, flips sign from one step to the next)
     is a jump of 2 pi to a network fed the raw number, and a normaliser turns it into noise of
@@ -99,6 +109,12 @@ class ObservationFeatures:
         angles = set(spec.angle_indices)
         self._plain = [index for index in range(spec.obs_dim) if index not in angles]
         self._angles = list(spec.angle_indices)
+        half_turns = set(spec.half_turn_indices)
+        self._angle_multipliers = (
+            np.array([2.0 if index in half_turns else 1.0 for index in spec.angle_indices], dtype=np.float32)
+            if half_turns
+            else None
+        )
         self._world_offsets = spec.world_offsets
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
@@ -107,6 +123,8 @@ class ObservationFeatures:
         parts = [observations[..., self._plain]]
         if self._angles:
             angles = observations[..., self._angles]
+            if self._angle_multipliers is not None:
+                angles = angles * self._angle_multipliers
             parts += [np.sin(angles), np.cos(angles)]
         parts += [_in_world_frame(observations, offset) for offset in self._world_offsets]
         return np.concatenate(parts, axis=-1)

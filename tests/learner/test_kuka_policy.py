@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from common.kuka import HARD_V1_ENV_ID
-from common.kuka.env import make_kuka_env
+from common.kuka.env import BLOCK_Z, make_kuka_env
 from common.policy.inference import ObservationFeatures
 from learner.config import PPOConfig, TrainConfig
 from learner.kuka_policy import kuka_policy_spec
@@ -41,3 +41,37 @@ def test_without_the_option_the_networks_inputs_are_as_before():
 def test_the_option_survives_a_checkpoints_config_round_trip(value):
     config = TrainConfig(ppo=PPOConfig(world_block_offset=value))
     assert TrainConfig.from_dict(config.to_dict()).ppo.world_block_offset is value
+
+
+@pytest.mark.parametrize("half_turn", [True, False])
+def test_with_half_turn_block_yaw_a_block_turned_half_a_turn_looks_the_same_to_the_networks(half_turn):
+    features = ObservationFeatures(kuka_policy_spec(PPOConfig(world_block_offset=True, half_turn_block_yaw=half_turn)))
+    env = make_kuka_env(HARD_V1_ENV_ID)
+    try:
+        env.reset(seed=3)
+        client = env.unwrapped._client
+        block_x, block_y, block_yaw = env.block_pose()
+        inputs = []
+        for yaw in (block_yaw, block_yaw + np.pi):
+            orientation = client.getQuaternionFromEuler((0.0, 0.0, yaw))
+            client.resetBasePositionAndOrientation(env.unwrapped._block, (block_x, block_y, BLOCK_Z), orientation)
+            observation, _ = env.unwrapped._observe()
+            inputs.append(features(observation[None])[0])
+    finally:
+        env.close()
+    difference = np.abs(inputs[0] - inputs[1]).max()
+    if half_turn:
+        assert difference < 1e-4
+    else:
+        assert difference > 1.0  # the block's (sin, cos) flip sign
+
+
+def test_half_turn_block_yaw_needs_angle_features():
+    with pytest.raises(ValueError, match="half_turn_block_yaw needs angle_features"):
+        PPOConfig(angle_features=False, half_turn_block_yaw=True)
+
+
+@pytest.mark.parametrize("value", [True, False])
+def test_half_turn_block_yaw_survives_a_checkpoints_config_round_trip(value):
+    config = TrainConfig(ppo=PPOConfig(half_turn_block_yaw=value))
+    assert TrainConfig.from_dict(config.to_dict()).ppo.half_turn_block_yaw is value

@@ -215,6 +215,32 @@ def test_angle_indices_must_name_distinct_observation_entries(angles):
         PolicySpec(obs_dim=5, action_dim=1, angle_indices=angles)
 
 
+def test_a_half_turn_angle_reads_the_same_half_a_turn_on_and_a_plain_angle_does_not():
+    features = ObservationFeatures(PolicySpec(obs_dim=4, action_dim=1, angle_indices=(1, 3), half_turn_indices=(3,)))
+    pose = np.array([[0.2, 0.4, 7.0, 2.5]])
+    half_turned_box = np.array([[0.2, 0.4, 7.0, 2.5 - np.pi]])
+    half_turned_gripper = np.array([[0.2, 0.4 - np.pi, 7.0, 2.5]])
+
+    assert features(half_turned_box) == pytest.approx(features(pose), abs=1e-12)
+    assert np.abs(features(half_turned_gripper) - features(pose)).max() > 1.0
+    # (sin, cos) of the plain angle, then of twice the half-turn one
+    assert features(pose)[0, 2:] == pytest.approx([np.sin(0.4), np.sin(5.0), np.cos(0.4), np.cos(5.0)], abs=1e-12)
+
+
+def test_inference_matches_the_training_network_with_a_half_turn_angle():
+    torch.manual_seed(9)
+    spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 8), angle_indices=(0, 4), half_turn_indices=(4,))
+    network = perturbed(ActorCritic(spec))
+    normalizer = fitted_normalizer(spec)
+    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+
+
+@pytest.mark.parametrize("half_turns", [(2,), (3, 3), (7,)])
+def test_half_turn_indices_must_be_distinct_entries_of_angle_indices(half_turns):
+    with pytest.raises(ValueError, match="half_turn_indices"):
+        PolicySpec(obs_dim=5, action_dim=1, angle_indices=(1, 3), half_turn_indices=half_turns)
+
+
 def test_a_state_dependent_std_starts_at_its_initial_value_then_varies_with_the_state():
     torch.manual_seed(4)
     spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 8), init_log_std=-0.7, state_dependent_std=True)
