@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 44, item 2: three levers of the student not yet screened on KukaGraspHard-v1, each one 6M-step trial on
+# Issue 44, item 2: four levers of the student not yet screened on KukaGraspHard-v1, each one 6M-step trial on
 # screening seed 100 with the teacher the bake-off runs (CURROT, estimate=recent, from the easiest point,
 # the box target leaving shaping free), then 100 hardest-point episodes from seed 20000, as in BENCHMARKS
 # "Issue 44: screening the teacher and the student" (whose 66% is the comparison):
@@ -8,7 +8,10 @@
 #          (envs8.json searches nothing: lr_final_fraction 0 is the default).
 #   worldoffset: the networks also see the block's offset from the gripper in the world frame (what the
 #          policy observes; PPOConfig.world_block_offset).
-# A fourth, the network at 128 x 128, was started and stopped at 100k steps once worldoffset had reached 85%:
+#   halfturn: worldoffset, and the block's yaw seen as (sin 2a, cos 2a) (PPOConfig.half_turn_block_yaw): the
+#          bake-off's world-offset CURROT seed 0 turned the wrist the long way for every block turned clockwise
+#          and missed most of those near the arm (BENCHMARKS "The wrist turns the long way").
+# A fifth, the network at 128 x 128, was started and stopped at 100k steps once worldoffset had reached 85%:
 # the bake-off with that student came first.
 # Resumable: run it again and a finished lever is skipped, an unfinished tune resumes.
 #   setsid nohup nice -n 10 benchmarks/tune-v1-currot-levers/run.sh > runs/tune-v1-currot-levers.log 2>&1 &
@@ -16,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
 HERE=benchmarks/tune-v1-currot-levers
-for lever in sdstd envs8 worldoffset; do
+for lever in sdstd envs8 worldoffset halfturn; do
     out=runs/tune-v1-currot-$lever
     [[ -f $HERE/evaluation-$lever-seed20000.json ]] && continue
     extra=()
