@@ -8,9 +8,9 @@
 #          (envs8.json searches nothing: lr_final_fraction 0 is the default).
 #   worldoffset: the networks also see the block's offset from the gripper in the world frame (what the
 #          policy observes; PPOConfig.world_block_offset).
-#   halfturn: worldoffset, and the block's yaw seen as (sin 2a, cos 2a) (PPOConfig.half_turn_block_yaw): the
-#          bake-off's world-offset CURROT seed 0 turned the wrist the long way for every block turned clockwise
-#          and missed most of those near the arm (BENCHMARKS "The wrist turns the long way").
+#   halfturn: worldoffset, and the block's yaw seen as (sin 2a, cos 2a) (PPOConfig.half_turn_block_yaw): a
+#          block turned half a turn is the same block, yet the bake-off's world-offset CURROT seed 0 turns the
+#          wrist one way only, up to 180 degrees (BENCHMARKS "Where the world-offset students miss").
 # A fifth, the network at 128 x 128, was started and stopped at 100k steps once worldoffset had reached 85%:
 # the bake-off with that student came first.
 # Resumable: run it again and a finished lever is skipped, an unfinished tune resumes.
