@@ -134,7 +134,13 @@ class EvaluationResult:
         # Older results lack the diagnostics columns.
         diagnostics = (
             tuple(
-                EpisodeDiagnostics.from_dict({name: per_episode[name][index] for name in DIAGNOSTICS_COLUMNS})
+                EpisodeDiagnostics.from_dict(
+                    {
+                        name: per_episode[name][index]
+                        for name in (*DIAGNOSTICS_COLUMNS, *LATER_DIAGNOSTICS_COLUMNS)
+                        if name in per_episode
+                    }
+                )
                 for index in range(len(episodes))
             )
             if all(name in per_episode for name in DIAGNOSTICS_COLUMNS)
@@ -165,6 +171,8 @@ DIAGNOSTICS_COLUMNS = (
     "off_square_degrees",
 )
 """The ``per_episode`` columns an ``EpisodeDiagnostics`` is read back from (the others are derived)."""
+LATER_DIAGNOSTICS_COLUMNS = ("touchdown_wrist_turn_degrees",)
+"""Columns read back too where a result has them: results written before they were recorded lack them."""
 
 Played = tuple[EpisodeStats, EpisodeDiagnostics]
 

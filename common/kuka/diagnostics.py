@@ -6,8 +6,9 @@ A policy (or the scripted controller) plays one seeded episode through ``play_ep
 - how far its x lies beyond the arm's reach: the IK target's x is clamped to ``TARGET_X_RANGE``, so a block
   outside it can only be grasped by hanging the fingers over its end;
 - at touchdown (the first touch of the tray, which starts the scripted grasp), the block's x and y in the
-  gripper's frame as the last action saw them, and the fingers' angle from square to the block (the
-  environment's own ``off_square_degrees``); an episode cut at the step limit has neither.
+  gripper's frame as the last action saw them, how far the wrist had turned by then, and the fingers' angle
+  from square to the block (the environment's own ``off_square_degrees``); an episode cut at the step limit
+  has none of them.
 """
 
 from __future__ import annotations
@@ -47,6 +48,9 @@ class EpisodeDiagnostics:
     touchdown_block_y: float | None
     off_square_degrees: float | None
     """How far (degrees, 0 to 90) the fingers were from square to the block at touchdown."""
+    touchdown_wrist_turn_degrees: float | None = None
+    """How far (degrees, signed as the yaw actions add up) the wrist had turned from its start one step before
+    touchdown; None also in results written before it was recorded."""
 
     @property
     def beyond_clamp(self) -> float:
@@ -70,12 +74,13 @@ class EpisodeDiagnostics:
             "touchdown_block_y": self.touchdown_block_y,
             "touchdown_offset": self.touchdown_offset,
             "off_square_degrees": self.off_square_degrees,
+            "touchdown_wrist_turn_degrees": self.touchdown_wrist_turn_degrees,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EpisodeDiagnostics:
         def optional(name: str) -> float | None:
-            return None if data[name] is None else float(data[name])
+            return None if data.get(name) is None else float(data[name])
 
         return cls(
             block_x=float(data["block_x"]),
@@ -84,6 +89,7 @@ class EpisodeDiagnostics:
             touchdown_block_x=optional("touchdown_block_x"),
             touchdown_block_y=optional("touchdown_block_y"),
             off_square_degrees=optional("off_square_degrees"),
+            touchdown_wrist_turn_degrees=optional("touchdown_wrist_turn_degrees"),
         )
 
 
@@ -105,7 +111,7 @@ def play_episode(env: KukaGraspEnv, task: Task, act: Controller, seed: int) -> P
     block_x, block_y, block_yaw = env.block_pose()
     total, length = 0.0, 0
     while True:
-        seen = observation
+        seen, wrist_turn = observation, env.wrist_turn
         observation, reward, terminated, truncated, info = env.step(np.clip(act(observation), low, high))
         total += float(reward)
         length += 1
@@ -113,6 +119,7 @@ def play_episode(env: KukaGraspEnv, task: Task, act: Controller, seed: int) -> P
             break
     # A terminated episode touched the tray (the only way one ends before the step limit).
     touchdown = [float(value) for value in seen[BLOCK_XY_IN_GRIPPER]] if terminated else [None, None]
+    touchdown_wrist_turn = math.degrees(wrist_turn) if terminated else None
     off_square = info.get("off_square_degrees")
     diagnostics = EpisodeDiagnostics(
         block_x=block_x,
@@ -121,5 +128,6 @@ def play_episode(env: KukaGraspEnv, task: Task, act: Controller, seed: int) -> P
         touchdown_block_x=touchdown[0],
         touchdown_block_y=touchdown[1],
         off_square_degrees=None if off_square is None else float(off_square),
+        touchdown_wrist_turn_degrees=touchdown_wrist_turn,
     )
     return PlayedEpisode(total, bool(info.get("is_success", False)), length, diagnostics)

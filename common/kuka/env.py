@@ -179,6 +179,12 @@ class KukaGraspEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         (x, y, _), orientation = self._base_pose(self._block)
         return x, y, self._euler(orientation)[2]
 
+    @property
+    def wrist_turn(self) -> float:
+        """How far (radians) the wrist has been turned since the reset, the yaw actions summed: which way and
+        how far a policy turns it, which no observation entry gives apart from the arm's own turn."""
+        return self._arm.wrist_yaw
+
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:

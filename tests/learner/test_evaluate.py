@@ -161,6 +161,10 @@ def test_each_episode_records_where_its_block_lay_and_the_scripted_controller_pl
     assert played["per_episode"]["success"] == [episode.success for episode in expected]
     assert played["per_episode"]["off_square_degrees"] == [e.diagnostics.off_square_degrees for e in expected]
     assert played["per_episode"]["block_x"] == per_episode["block_x"][:2]
+    # Played to its touchdowns, the wrist's turns are recorded and read back.
+    turns = played["per_episode"]["touchdown_wrist_turn_degrees"]
+    assert turns == [e.diagnostics.touchdown_wrist_turn_degrees for e in expected] and None not in turns
+    assert [each.touchdown_wrist_turn_degrees for each in EvaluationResult.from_dict(played).diagnostics] == turns
     assert "scripted controller: KukaGraspHard-v1, hardest task, 2 episodes" in capsys.readouterr().out
 
     # Without a checkpoint there is nothing to evaluate but the scripted controller; a checkpoint plays its own env.

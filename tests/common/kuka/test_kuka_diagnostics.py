@@ -11,7 +11,7 @@ import pytest
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics, beyond_clamp, play_episode
-from common.kuka.env import FAR_CENTRE, FAR_MIN_DISTANCE, FAR_X_RANGE, FAR_Y_RANGE, make_kuka_env
+from common.kuka.env import FAR_CENTRE, FAR_MIN_DISTANCE, FAR_X_RANGE, FAR_Y_RANGE, YAW_PER_ACTION, make_kuka_env
 from common.kuka.scripted import scripted_action
 from common.kuka.task_space import task_space_for
 
@@ -62,16 +62,22 @@ def test_an_episode_records_its_placement_and_touchdown_as_played(env):
 
     # Replayed by hand: the touchdown figures are the last observation's block offset and the step's angle.
     observation, _ = env.reset(seed=100003, options={"task": HARDEST})
-    total, length = 0.0, 0
+    total, length, yaw_actions = 0.0, 0, []
     while True:
         seen = observation
-        observation, reward, terminated, truncated, info = env.step(scripted_action(observation))
+        action = scripted_action(observation)
+        observation, reward, terminated, truncated, info = env.step(action)
         total, length = total + reward, length + 1
+        yaw_actions.append(float(action[2]))
         if terminated or truncated:
             break
     assert terminated and recorded.success == info["is_success"]
     assert (recorded.reward, recorded.length) == (pytest.approx(total), length)
     assert (diagnostics.touchdown_block_x, diagnostics.touchdown_block_y) == tuple(float(v) for v in seen[6:8])
+    # The wrist's turn one step before touchdown: every yaw action but the last, summed.
+    wrist_turn = math.degrees(YAW_PER_ACTION * sum(yaw_actions[:-1]))
+    assert abs(wrist_turn) > 5.0  # the block lies turned from the fingers' start, so the script turned them
+    assert diagnostics.touchdown_wrist_turn_degrees == pytest.approx(wrist_turn, abs=1e-6)
     assert diagnostics.off_square_degrees == info["off_square_degrees"]
     assert diagnostics.touchdown_offset == pytest.approx(math.hypot(*seen[6:8]))
 
@@ -104,14 +110,17 @@ def test_an_episode_cut_at_the_step_limit_never_touched_down():
     assert episode.length == 5 and not episode.success
     diagnostics = episode.diagnostics
     assert diagnostics.touchdown_block_x is None and diagnostics.touchdown_offset is None
-    assert diagnostics.off_square_degrees is None
+    assert diagnostics.off_square_degrees is None and diagnostics.touchdown_wrist_turn_degrees is None
 
 
 def test_diagnostics_survive_a_round_trip_through_their_dict():
-    touched = EpisodeDiagnostics(0.68, 0.01, 2.0, -0.03, 0.002, 1.5)
+    touched = EpisodeDiagnostics(0.68, 0.01, 2.0, -0.03, 0.002, 1.5, -40.0)
     untouched = EpisodeDiagnostics(0.55, -0.1, -1.0, None, None, None)
     for diagnostics in (touched, untouched):
         written = diagnostics.to_dict()
         assert EpisodeDiagnostics.from_dict(written) == diagnostics
+    # Results written before the wrist's turn was recorded lack the key.
+    older = {key: value for key, value in touched.to_dict().items() if key != "touchdown_wrist_turn_degrees"}
+    assert EpisodeDiagnostics.from_dict(older).touchdown_wrist_turn_degrees is None
     assert touched.to_dict()["beyond_clamp"] == pytest.approx(0.03)
     assert touched.to_dict()["touchdown_offset"] == pytest.approx(math.hypot(0.03, 0.002))
