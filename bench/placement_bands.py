@@ -22,7 +22,7 @@ from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
 from learner.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, placement_record
-from learner.checkpoint_evaluation import EvaluationResult
+from learner.checkpoint_evaluation import pooled_episodes
 from learner.episode_diagnostics import band_table, plot_bands
 
 Rows = dict[str, list[list[tuple[EpisodeDiagnostics, bool]]]]
@@ -30,13 +30,10 @@ Rows = dict[str, list[list[tuple[EpisodeDiagnostics, bool]]]]
 
 
 def add(rows: Rows, label: str, data: dict[str, Any], source: Path, seeds: set[tuple[int, int]]) -> None:
-    result = EvaluationResult.from_dict(data)
-    if not result.diagnostics:
-        raise SystemExit(f"{source} was written before evaluations recorded placements; evaluate it again")
-    seeds.add((result.seed, len(result.episodes)))
-    if len(seeds) > 1:
-        raise SystemExit(f"{source} played other episodes than the files before it: {sorted(seeds)}")
-    rows.setdefault(label, []).append(result.diagnosed())
+    try:
+        rows.setdefault(label, []).append(pooled_episodes(data, source, seeds))
+    except ValueError as error:
+        raise SystemExit(str(error)) from None
 
 
 def main() -> None:

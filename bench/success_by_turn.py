@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.checkpoint_evaluation import EvaluationResult
+from learner.checkpoint_evaluation import pooled_episodes
 
 X_BANDS = ((-math.inf, 0.5), (0.5, 0.6), (0.6, 0.65), (0.65, math.inf))
 """Block x (metres) bands: below the IK target's x range, its near half, its far half, and beyond it."""
@@ -92,14 +92,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     seeds: set[tuple[int, int]] = set()
     for path in args.files:
         data = json.loads(path.read_text(encoding="utf-8"))
-        result = EvaluationResult.from_dict(data)
-        if not result.diagnostics:
-            raise SystemExit(f"{path} was written before evaluations recorded placements; evaluate it again")
-        seeds.add((result.seed, len(result.episodes)))
-        if len(seeds) > 1:
-            raise SystemExit(f"{path} played other episodes than the files before it: {sorted(seeds)}")
+        try:
+            diagnosed = pooled_episodes(data, path, seeds)
+        except ValueError as error:
+            raise SystemExit(str(error)) from None
         name = label(path, data)
-        columns[str(path) if name in columns else name] = result.diagnosed()
+        columns[str(path) if name in columns else name] = diagnosed
     ((seed, episodes),) = seeds
     print(f"episode seeds {seed} to {seed + episodes - 1}; each cell: success (episodes), median touchdown offset\n")
     print("\n".join(table(columns)))

@@ -157,6 +157,21 @@ class EvaluationResult:
         )
 
 
+def pooled_episodes(
+    data: dict[str, Any], source: object, played: set[tuple[int, int]]
+) -> list[tuple[EpisodeDiagnostics, bool]]:
+    """An ``evaluate --json`` result's episodes with their diagnostics, for a table pooled over files: refused
+    (ValueError) when ``source`` predates diagnostics or played other episode seeds than the files before it,
+    whose (first seed, episodes) ``played`` holds and this one joins."""
+    result = EvaluationResult.from_dict(data)
+    if not result.diagnostics:
+        raise ValueError(f"{source} was written before evaluations recorded placements; evaluate it again")
+    played.add((result.seed, len(result.episodes)))
+    if len(played) > 1:
+        raise ValueError(f"{source} played other episodes than the files before it: {sorted(played)}")
+    return result.diagnosed()
+
+
 def available_cpus() -> int:
     """CPUs this process may run on (respects taskset and container limits where the OS reports them)."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
