@@ -72,7 +72,7 @@ class PolicySpec:
                 raise ValueError(
                     f"a world offset must name 5 distinct observation indices below {self.obs_dim}, got {offset}"
                 )
-        if len(set(self.half_turn_indices)) != len(self.half_turn_indices) or not set(self.half_turn_indices).issubset(
+        if not self._distinct_entries(self.half_turn_indices) or not set(self.half_turn_indices) <= set(
             self.angle_indices
         ):
             raise ValueError(
