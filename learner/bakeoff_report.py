@@ -102,12 +102,16 @@ def placement_record(diagnosed: Sequence[tuple[EpisodeDiagnostics, bool]]) -> di
     }
 
 
+def _seed_count(count: int) -> str:
+    return f"{count} seed" if count == 1 else f"{count} seeds"
+
+
 def placement_rows(
     results: Sequence[TeacherResult], scripted: EvaluationResult | None
 ) -> list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]]:
     """The placement table's rows: each teacher with diagnosed episodes, then the scripted controller."""
     rows: list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{TEACHER_LABELS[result.teacher]} ({len(result.runs)} seeds)", result.diagnosed)
+        (f"{TEACHER_LABELS[result.teacher]} ({_seed_count(len(result.runs))})", result.diagnosed)
         for result in results
         if result.diagnosed
     ]

@@ -136,7 +136,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert results["scripted"]["success_by_placement"] == scripted["success_by_placement"]
     assert sum(band["episodes"] for band in results["teachers"][0]["success_by_placement"][:4]) == 3
     assert "## Where the students fail: success by block placement" in table
-    for row in ("| No curriculum: hardest task only (1 seeds) |", "| Uniform random tasks (1 seeds) |"):
+    for row in ("| No curriculum: hardest task only (1 seed) |", "| Uniform random tasks (1 seed) |"):
         assert row in table
     assert "| Scripted controller (no learning) |" in table and "left out" not in table
     assert iio.imread(out / "success_by_placement.png").ndim == 3
