@@ -10,6 +10,9 @@ must have played the same episode seeds, so each row is read on the same placeme
     .venv/bin/kuka-curriculum evaluate --scripted --episodes 100 --seed 100000 --json /tmp/scripted.json
     .venv/bin/python bench/placement_bands.py /tmp/currot-seed*.json /tmp/scripted.json --plot /tmp/bands.png
 
+A bake-off's own ``runs/<teacher>-seed<k>/evaluation.json`` holds no ``teacher`` key: its directory
+names the teacher.
+
 Prints the markdown table; ``--json`` also writes each row's band counts.
 """
 
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +40,19 @@ def add(rows: Rows, label: str, data: dict[str, Any], source: Path, seeds: set[t
         raise SystemExit(str(error)) from None
 
 
+def teacher_of(data: dict[str, Any], source: Path) -> str:
+    """The teacher an evaluation belongs to: its ``teacher`` key, else its bake-off run directory's name."""
+    if "teacher" in data:
+        return str(data["teacher"])
+    match = re.fullmatch(r"(.+)-seed\d+", source.resolve().parent.name)
+    if match is None or match.group(1) not in TEACHER_LABELS:
+        raise SystemExit(
+            f"{source}: names no teacher; give an evaluate --json file of a training run, or a bake-off's "
+            "runs/<teacher>-seed<k>/evaluation.json"
+        )
+    return match.group(1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files")
@@ -49,11 +66,12 @@ def main() -> None:
         if data.get("controller") == "scripted":
             add(rows, SCRIPTED_LABEL, data, path, seeds)
             continue
-        add(rows, TEACHER_LABELS.get(data["teacher"], data["teacher"]), data, path, seeds)
+        teacher = teacher_of(data, path)
+        add(rows, TEACHER_LABELS.get(teacher, teacher), data, path, seeds)
         if "scripted" in data:
             add(rows, SCRIPTED_LABEL, data["scripted"], path, seeds)
     pooled: list[tuple[str, list[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{label} ({len(files)} policies)", [pair for each in files for pair in each])
+        (f"{label} ({len(files)} {'policy' if len(files) == 1 else 'policies'})", [pair for each in files for pair in each])
         for label, files in rows.items()
         if label != SCRIPTED_LABEL
     ]

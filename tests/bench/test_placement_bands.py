@@ -52,3 +52,18 @@ def test_files_pool_per_teacher_beside_the_scripted_controller(tmp_path, monkeyp
     monkeypatch.setattr(sys, "argv", ["placement_bands", str(tmp_path / "seed0.json"), str(tmp_path / "other.json")])
     with pytest.raises(SystemExit, match="played other episodes"):
         main()
+
+
+def test_a_bake_off_run_evaluation_takes_its_teacher_from_its_directory(tmp_path, monkeypatch, capsys):
+    run = tmp_path / "runs" / "self-paced-seed3"
+    run.mkdir(parents=True)
+    (run / "evaluation.json").write_text(json.dumps(evaluation([(0.58, True), (0.68, False)])))
+    monkeypatch.setattr(sys, "argv", ["placement_bands", str(run / "evaluation.json")])
+    main()
+    assert "| Self-paced (SPDL) (1 policy) | 50% (2) |" in capsys.readouterr().out
+
+    # Neither a teacher key nor a run directory: say so rather than guess.
+    (tmp_path / "loose.json").write_text(json.dumps(evaluation([(0.58, True)])))
+    monkeypatch.setattr(sys, "argv", ["placement_bands", str(tmp_path / "loose.json")])
+    with pytest.raises(SystemExit, match="names no teacher"):
+        main()
