@@ -53,6 +53,10 @@ def teacher_of(data: dict[str, Any], source: Path) -> str:
     return match.group(1)
 
 
+def policy_count(count: int) -> str:
+    return f"{count} policy" if count == 1 else f"{count} policies"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files")
@@ -71,7 +75,7 @@ def main() -> None:
         if "scripted" in data:
             add(rows, SCRIPTED_LABEL, data["scripted"], path, seeds)
     pooled: list[tuple[str, list[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{label} ({len(files)} {'policy' if len(files) == 1 else 'policies'})", [pair for each in files for pair in each])
+        (f"{label} ({policy_count(len(files))})", [pair for each in files for pair in each])
         for label, files in rows.items()
         if label != SCRIPTED_LABEL
     ]
