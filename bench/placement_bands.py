@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, placement_record
+from learner.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
 from learner.checkpoint_evaluation import pooled_episodes
 from learner.episode_diagnostics import band_table, plot_bands
 
@@ -53,10 +53,6 @@ def teacher_of(data: dict[str, Any], source: Path) -> str:
     return match.group(1)
 
 
-def policy_count(count: int) -> str:
-    return f"{count} policy" if count == 1 else f"{count} policies"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files")
@@ -75,7 +71,7 @@ def main() -> None:
         if "scripted" in data:
             add(rows, SCRIPTED_LABEL, data["scripted"], path, seeds)
     pooled: list[tuple[str, list[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{label} ({policy_count(len(files))})", [pair for each in files for pair in each])
+        (f"{label} ({counted(len(files), 'policy', 'policies')})", [pair for each in files for pair in each])
         for label, files in rows.items()
         if label != SCRIPTED_LABEL
     ]

@@ -102,8 +102,9 @@ def placement_record(diagnosed: Sequence[tuple[EpisodeDiagnostics, bool]]) -> di
     }
 
 
-def _seed_count(count: int) -> str:
-    return f"{count} seed" if count == 1 else f"{count} seeds"
+def counted(count: int, singular: str, plural: str) -> str:
+    """``1 seed``, ``2 seeds``: a count with its noun agreeing, for table labels."""
+    return f"{count} {singular if count == 1 else plural}"
 
 
 def placement_rows(
@@ -111,7 +112,7 @@ def placement_rows(
 ) -> list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]]:
     """The placement table's rows: each teacher with diagnosed episodes, then the scripted controller."""
     rows: list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{TEACHER_LABELS[result.teacher]} ({_seed_count(len(result.runs))})", result.diagnosed)
+        (f"{TEACHER_LABELS[result.teacher]} ({counted(len(result.runs), 'seed', 'seeds')})", result.diagnosed)
         for result in results
         if result.diagnosed
     ]
