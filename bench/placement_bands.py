@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
 from learner.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
+from learner.bakeoff_runs import Run
 from learner.checkpoint_evaluation import pooled_episodes
 from learner.episode_diagnostics import band_table, plot_bands
 
@@ -44,13 +44,13 @@ def teacher_of(data: dict[str, Any], source: Path) -> str:
     """The teacher an evaluation belongs to: its ``teacher`` key, else its bake-off run directory's name."""
     if "teacher" in data:
         return str(data["teacher"])
-    match = re.fullmatch(r"(.+)-seed\d+", source.resolve().parent.name)
-    if match is None or match.group(1) not in TEACHER_LABELS:
+    run = Run.of_directory(source.resolve().parent)
+    if run is None or run.teacher not in TEACHER_LABELS:
         raise SystemExit(
             f"{source}: names no teacher; give an evaluate --json file of a training run, or a bake-off's "
             "runs/<teacher>-seed<k>/evaluation.json"
         )
-    return match.group(1)
+    return run.teacher
 
 
 def main() -> None:

@@ -12,6 +12,7 @@ training child (it checkpoints and stops); running the same command again carrie
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -70,6 +71,13 @@ class Run:
     def in_bakeoff(cls, out: Path, teacher: str, seed: int) -> Run:
         """The run of ``teacher`` and ``seed`` in the bake-off directory ``out``."""
         return cls(teacher, seed, Path(out) / RUNS_DIR / f"{teacher}-seed{seed}")
+
+    @classmethod
+    def of_directory(cls, directory: Path) -> Run | None:
+        """The run a bake-off keeps in ``directory``, read from its ``<teacher>-seed<k>`` name; None for
+        a directory not named so."""
+        match = re.fullmatch(r"(.+)-seed(\d+)", directory.name)
+        return cls(match.group(1), int(match.group(2)), directory) if match else None
 
     @property
     def name(self) -> str:
