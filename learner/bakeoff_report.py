@@ -202,7 +202,7 @@ def results_markdown(
     )
     seed_counts = sorted({len(result.runs) for result in results})
     seeds = (
-        f"{seed_counts[0]} seed{'s' if seed_counts[0] > 1 else ''}"
+        counted(seed_counts[0], "seed", "seeds")
         if len(seed_counts) == 1
         else f"{seed_counts[0]} to {seed_counts[-1]} seeds (the Seeds column says how many)"
     )
@@ -299,9 +299,7 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
             axes.set_title(f"{label}: no evaluations", fontsize="small")
             continue
         mean = np.array([[curve[step] for step in common_steps] for curve in curves]).mean(axis=0)
-        (line,) = overview.plot(
-            common_steps, mean, label=f"{label} ({len(curves)} seed{'s' if len(curves) > 1 else ''})"
-        )
+        (line,) = overview.plot(common_steps, mean, label=f"{label} ({counted(len(curves), 'seed', 'seeds')})")
         for curve in curves:
             steps = sorted(curve)
             axes.plot(steps, [curve[step] for step in steps], color=line.get_color(), alpha=0.35, linewidth=0.9)
