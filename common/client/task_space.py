@@ -1,8 +1,10 @@
 """The curriculum task space: named, bounded parameters that set an episode's difficulty.
 
-A task is a plain ``dict`` of parameter name to float. ``TaskSpace`` is generic: the teacher service
-builds spaces from HTTP requests, a trainer declares its own (the KUKA spaces are in
-``common.kuka.task_space``).
+A task is a plain ``dict`` of parameter name to value: a float for a float parameter (a box's side),
+an int for an integer one (a level seed, a layout choice; ``low`` and ``high`` both included). One
+integer parameter is gymnasium's Discrete(n), several are MultiDiscrete. ``TaskSpace`` is generic:
+the teacher service builds spaces from HTTP requests, a trainer declares its own (the KUKA spaces
+are in ``common.kuka.task_space``).
 """
 
 from __future__ import annotations
@@ -10,15 +12,23 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 Task = dict[str, float]
+"""Parameter name to value; an integer parameter's value is an ``int`` (which a float annotation admits)."""
+
+ParameterType = Literal["float", "integer"]
+PARAMETER_TYPES: tuple[ParameterType, ...] = ("float", "integer")
 
 
 @dataclass(frozen=True)
 class Parameter:
-    """One task dimension. ``easiest``/``hardest`` are optional anchors used by curricula."""
+    """One task dimension. ``easiest``/``hardest`` are optional anchors used by curricula.
+
+    An ``integer`` parameter takes the whole numbers from ``low`` to ``high`` inclusive; its bounds
+    and anchors must be whole numbers, and are kept as ``int``."""
 
     name: str
     low: float
@@ -26,15 +36,32 @@ class Parameter:
     hardest: float | None = None
     easiest: float | None = None
     doc: str = ""
+    type: ParameterType = "float"
 
     def __post_init__(self) -> None:
         if not self.name:
             raise ValueError("parameter name must be non-empty")
+        if self.type not in PARAMETER_TYPES:
+            raise ValueError(f"parameter {self.name!r}: type must be one of {list(PARAMETER_TYPES)}, got {self.type!r}")
         if not (math.isfinite(self.low) and math.isfinite(self.high)) or self.low > self.high:
             raise ValueError(f"parameter {self.name!r}: need finite low <= high, got [{self.low}, {self.high}]")
         for label, value in (("hardest", self.hardest), ("easiest", self.easiest)):
             if value is not None and not self.low <= value <= self.high:
                 raise ValueError(f"parameter {self.name!r}: {label}={value} outside [{self.low}, {self.high}]")
+        if self.type == "integer":
+            for label in ("low", "high", "hardest", "easiest"):
+                value = getattr(self, label)
+                if value is not None and not float(value).is_integer():
+                    raise ValueError(f"parameter {self.name!r} is an integer parameter: {label}={value} is not whole")
+                if value is not None:
+                    object.__setattr__(self, label, int(value))
+
+    @property
+    def levels(self) -> int:
+        """How many values an integer parameter takes (``high - low + 1``)."""
+        if self.type != "integer":
+            raise ValueError(f"parameter {self.name!r} is a float parameter: it has no count of levels")
+        return int(self.high - self.low) + 1
 
 
 class TaskSpace:
@@ -49,6 +76,35 @@ class TaskSpace:
             raise ValueError(f"duplicate parameter names in {self.names}")
         self.low = np.array([p.low for p in self.parameters], dtype=np.float64)
         self.high = np.array([p.high for p in self.parameters], dtype=np.float64)
+        self.integer = np.array([p.type == "integer" for p in self.parameters])
+        """Which dimensions are integer parameters."""
+
+    @property
+    def types(self) -> frozenset[ParameterType]:
+        """The parameter types this space uses."""
+        return frozenset(p.type for p in self.parameters)
+
+    def level_count(self) -> int:
+        """How many distinct tasks an all-integer space holds: the product of its parameters' levels
+        (Python's int, so a huge MultiDiscrete space does not overflow)."""
+        return math.prod(p.levels for p in self.parameters)
+
+    def level_task(self, level: int) -> Task:
+        """The task numbered ``level`` in an all-integer space, the first parameter varying slowest."""
+        if not 0 <= level < self.level_count():
+            raise ValueError(f"level {level} is outside [0, {self.level_count() - 1}]")
+        task: Task = {}
+        for parameter in reversed(self.parameters):
+            level, offset = divmod(level, parameter.levels)
+            task[parameter.name] = int(parameter.low) + offset
+        return {name: task[name] for name in self.names}
+
+    def task_level(self, task: Mapping[str, float]) -> int:
+        """The number of a valid task of an all-integer space: ``level_task``'s inverse."""
+        level = 0
+        for parameter in self.parameters:
+            level = level * parameter.levels + int(task[parameter.name] - parameter.low)
+        return level
 
     def __len__(self) -> int:
         return len(self.parameters)
@@ -75,6 +131,9 @@ class TaskSpace:
         clean: Task = {}
         for p in self.parameters:
             raw = task[p.name]
+            if p.type == "integer":
+                clean[p.name] = _whole_number(p, raw)
+                continue
             try:
                 value = float(raw)
             except (TypeError, ValueError):
@@ -90,9 +149,13 @@ class TaskSpace:
         return np.array([task[name] for name in self.names], dtype=np.float64)
 
     def from_array(self, values: np.ndarray) -> Task:
-        """Map a vector to a task, clipping into the box (sampling noise can step outside)."""
+        """Map a vector to a task, clipping into the box (sampling noise can step outside) and
+        rounding integer parameters to the nearest whole number."""
         clipped = np.clip(np.asarray(values, dtype=np.float64), self.low, self.high)
-        return {name: float(v) for name, v in zip(self.names, clipped, strict=True)}
+        return {
+            name: int(np.rint(v)) if whole else float(v)
+            for name, v, whole in zip(self.names, clipped, self.integer, strict=True)
+        }
 
     def to_unit(self, points: np.ndarray) -> np.ndarray:
         """Rescale points (n, d) to [0, 1] per dimension; a zero-width dimension maps to 0."""
@@ -114,3 +177,16 @@ class TaskSpace:
 
     def easiest(self) -> Task:
         return self._anchor("easiest")
+
+
+def _whole_number(parameter: Parameter, raw: object) -> int:
+    """An integer parameter's value: an int inside the bounds (a float, even 3.0, is refused, so a
+    client that sends floats for levels hears of it at once)."""
+    if isinstance(raw, bool) or not isinstance(raw, (int, np.integer)):
+        raise ValueError(f"task parameter {parameter.name!r} is an integer parameter, got {raw!r}")
+    value = int(raw)
+    if not parameter.low <= value <= parameter.high:
+        raise ValueError(
+            f"task parameter {parameter.name!r}={value} is outside its bounds [{parameter.low}, {parameter.high}]"
+        )
+    return value
