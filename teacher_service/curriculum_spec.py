@@ -1,29 +1,23 @@
 """The service's curriculum spec: the teacher kind chooses the model its ``params`` must match.
 
 ``common.client.schemas.CurriculumSpec`` is what a client sends and reads back, with ``params`` as a plain
-mapping; here each kind has its own spec class, joined into one union discriminated by ``teacher``,
-so a bad parameter is a 422 naming the field and ``/docs`` shows every kind's parameters.
+mapping; here each kind has its own spec class, made from the registry of teacher kinds and joined
+into one union discriminated by ``teacher``, so a bad parameter is a 422 naming the field and
+``/docs`` shows every kind's parameters. A new kind needs no line here.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-from typing import Annotated, Any, Literal, get_args
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
-from pydantic import Field, TypeAdapter, ValidationError
+from pydantic import Field, TypeAdapter, ValidationError, create_model
 
 from common.client.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
-from teacher_service.teachers import TeacherParams
-from teacher_service.teachers.adr import AdrParams
-from teacher_service.teachers.alp_gmm import AlpGmmParams
-from teacher_service.teachers.covar_gmm import CovarGmmParams
-from teacher_service.teachers.currot import CurrotParams
-from teacher_service.teachers.learnability import LearnabilityParams
-from teacher_service.teachers.manual import ManualParams
-from teacher_service.teachers.riac import RiacParams
-from teacher_service.teachers.self_paced import SelfPacedParams
-from teacher_service.teachers.uniform import FixedParams, RandomParams
+from teacher_service.teachers import TEACHER_KINDS, Teacher, TeacherParams
 
 log = logging.getLogger(__name__)
 
@@ -39,86 +33,30 @@ class TypedSpec(CurriculumSpecBase):
         return CurriculumSpec.model_validate(self.model_dump())
 
 
-class AlpGmmCurriculum(TypedSpec):
-    teacher: Literal["alp-gmm"]
-    params: AlpGmmParams = Field(default_factory=AlpGmmParams)
-
-
-class ManualCurriculum(TypedSpec):
-    teacher: Literal["manual"]
-    params: ManualParams = Field(default_factory=ManualParams)
-
-
-class RandomCurriculum(TypedSpec):
-    teacher: Literal["random"]
-    params: RandomParams = Field(default_factory=RandomParams)
-
-
-class FixedCurriculum(TypedSpec):
-    teacher: Literal["fixed"]
-    params: FixedParams = Field(default_factory=FixedParams)
-
-
-class AdrCurriculum(TypedSpec):
-    teacher: Literal["adr"]
-    params: AdrParams = Field(default_factory=AdrParams)
-
-
-class SelfPacedCurriculum(TypedSpec):
-    teacher: Literal["self-paced"]
-    params: SelfPacedParams = Field(default_factory=SelfPacedParams)
-
-
-class CurrotCurriculum(TypedSpec):
-    teacher: Literal["currot"]
-    params: CurrotParams = Field(default_factory=CurrotParams)
-
-
-class CovarGmmCurriculum(TypedSpec):
-    teacher: Literal["covar-gmm"]
-    params: CovarGmmParams = Field(default_factory=CovarGmmParams)
-
-
-class RiacCurriculum(TypedSpec):
-    teacher: Literal["riac"]
-    params: RiacParams = Field(default_factory=RiacParams)
-
-
-class LearnabilityCurriculum(TypedSpec):
-    teacher: Literal["learnability"]
-    params: LearnabilityParams = Field(default_factory=LearnabilityParams)
-
-
-CurriculumRequest = Annotated[
-    AlpGmmCurriculum
-    | ManualCurriculum
-    | RandomCurriculum
-    | FixedCurriculum
-    | AdrCurriculum
-    | SelfPacedCurriculum
-    | CurrotCurriculum
-    | CovarGmmCurriculum
-    | RiacCurriculum
-    | LearnabilityCurriculum,
-    Field(discriminator="teacher"),
-]
-"""The body of ``PUT /api/v1/curricula/{name}``."""
-
-SPEC_CLASSES: dict[str, type[TypedSpec]] = {
-    get_args(spec.model_fields["teacher"].annotation)[0]: spec
-    for spec in (
-        AlpGmmCurriculum,
-        ManualCurriculum,
-        RandomCurriculum,
-        FixedCurriculum,
-        AdrCurriculum,
-        SelfPacedCurriculum,
-        CurrotCurriculum,
-        CovarGmmCurriculum,
-        RiacCurriculum,
-        LearnabilityCurriculum,
+def _spec_class(kind: str, teacher: type[Teacher]) -> type[TypedSpec]:
+    """The spec of one kind: ``teacher`` fixed to its name, ``params`` its parameter model (so
+    ``/docs`` names it ``AlpGmmCurriculum`` for ``alp-gmm``)."""
+    title = "".join(word.capitalize() for word in kind.split("-")) + "Curriculum"
+    spec: type[TypedSpec] = create_model(
+        title,
+        __base__=TypedSpec,
+        teacher=(Literal[kind], ...),  # type: ignore[arg-type]  # a Literal of the kind's name, made at import
+        params=(teacher.Params, Field(default_factory=teacher.Params)),
     )
-}
+    return spec
+
+
+SPEC_CLASSES: Mapping[str, type[TypedSpec]] = MappingProxyType(
+    {kind: _spec_class(kind, teacher) for kind, teacher in TEACHER_KINDS.items()}
+)
+"""One spec class per teacher kind, made from the registry (``teachers.TEACHER_KINDS``)."""
+
+if TYPE_CHECKING:
+    CurriculumRequest = TypedSpec
+else:
+    CurriculumRequest = Annotated[Union[tuple(SPEC_CLASSES.values())], Field(discriminator="teacher")]  # noqa: UP007
+"""The body of ``PUT /api/v1/curricula/{name}``: the kind's spec class, chosen by ``teacher``. The
+type checker sees the base class: the union is built from the registry when the module loads."""
 
 _ADAPTER: TypeAdapter[CurriculumRequest] = TypeAdapter(CurriculumRequest)
 

@@ -16,9 +16,9 @@ from common.client.task_space import Parameter, Task, TaskSpace
 
 API_PREFIX = "/api/v1"
 
-TeacherKind = Literal[
-    "alp-gmm", "manual", "random", "fixed", "adr", "self-paced", "currot", "covar-gmm", "riac", "learnability"
-]
+TeacherKind = Annotated[str, Field(min_length=1, max_length=32, pattern=r"^[a-z][a-z0-9-]*$")]
+"""A teacher kind's name, such as ``alp-gmm``. The service knows its kinds (``GET /api/v1/teachers``
+lists them, an unknown one is a 422), so this client needs no change when the service gains one."""
 
 CURRICULUM_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_TASKS_PER_REQUEST = 1024
