@@ -8,11 +8,10 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
-from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
@@ -180,7 +179,7 @@ def registration_params(teacher: str, settings: dict[str, Any]) -> dict[str, Any
     """What ``train`` registers the teacher's curriculum with: the KUKA defaults, then the bake-off's
     overrides for that teacher."""
     overrides = settings.get("teacher_params", {}).get(teacher, {})
-    return TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=overrides).teacher_params
+    return TrainConfig(teacher=teacher, teacher_overrides=overrides).teacher_params
 
 
 def results_markdown(

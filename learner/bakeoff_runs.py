@@ -21,11 +21,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 from tqdm import tqdm
 
-from common.client.schemas import TeacherKind
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError
@@ -109,7 +108,7 @@ def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[
         for teacher in ([kind] if kind in params else []) if dot else teachers:
             params[teacher][name] = value
     for teacher, values in params.items():
-        registered = TrainConfig(teacher=cast(TeacherKind, teacher), teacher_overrides=values).teacher_params
+        registered = TrainConfig(teacher=teacher, teacher_overrides=values).teacher_params
         try:
             TEACHER_KINDS[teacher].Params.parse(registered)
         except ValueError as error:

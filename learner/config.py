@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from common.kuka import ENV_ID, ENV_IDS
 from common.policy.noise import LOG_STD_BOUNDS
+from teacher_service.teachers import TEACHER_KINDS
 
 if TYPE_CHECKING:
     from common.client.schemas import TeacherKind
@@ -123,18 +124,8 @@ class PPOConfig:
 _OPTIONAL_FLOATS = ("target_kl", "min_log_std")
 """``PPOConfig`` fields that take a number or None."""
 
-TEACHERS: tuple[TeacherKind, ...] = (
-    "alp-gmm",
-    "manual",
-    "random",
-    "fixed",
-    "adr",
-    "self-paced",
-    "currot",
-    "covar-gmm",
-    "riac",
-    "learnability",
-)
+TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_KINDS)
+"""Every teacher kind the service knows, in its registry's order (``teacher_service.teachers``)."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {

@@ -20,7 +20,6 @@ import argparse
 import contextlib
 import json
 import os
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,7 +29,7 @@ from pydantic import SecretStr
 
 from common.kuka import ENV_IDS
 from learner import cli
-from learner.arguments import UsageError, add_override_flags, positive_int
+from learner.arguments import UsageError, add_override_flags, positive_int, run_command
 from learner.config import TEACHERS, TrainConfig
 from learner.config_file import ConfigFile
 from learner.json_file import write_json
@@ -125,7 +124,7 @@ class TuneSettings:
         """Every trial's config before its draws; by default a checkpoint each iteration, so a resumed trial
         loses little (long trials may take one every few iterations: each is ~150 kB on disk)."""
         config = TrainConfig(
-            teacher=self.teacher,  # type: ignore[arg-type]  # one of TEACHERS, checked by TrainConfig
+            teacher=self.teacher,
             env=self.env,
             total_steps=self.total_steps,
             workers=self.workers,
@@ -198,14 +197,7 @@ def _read_space(path: Path) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        return _tune(args)
-    except UsageError as error:
-        print(f"kuka-curriculum tune: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("kuka-curriculum tune: stopped at once; --resume continues it", file=sys.stderr)
-        return 130
+    return run_command("tune", _tune, args, "stopped at once; --resume continues it")
 
 
 def _tune(args: argparse.Namespace) -> int:
