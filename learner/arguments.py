@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Callable
 from typing import Any, get_args
 
@@ -81,3 +82,26 @@ def add_teacher_flags(parser: argparse.ArgumentParser) -> None:
         help="a parameter of the teacher kind, VALUE in JSON, on top of the example's defaults; repeatable "
         "(GET /api/v1/teachers lists each kind's parameters and bounds)",
     )
+
+
+def run_command(
+    command: str,
+    body: Callable[[argparse.Namespace], int],
+    args: argparse.Namespace,
+    on_interrupt: str,
+    failures: tuple[type[Exception], ...] = (),
+) -> int:
+    """Run a sub-command's ``body`` the way every command ends: a ``UsageError`` is one line on stderr
+    and exit 2, one of ``failures`` (work that ran and failed) one line and exit 1, and Ctrl-C prints
+    ``on_interrupt`` and exits 130, as a shell reports SIGINT."""
+    try:
+        return body(args)
+    except UsageError as error:
+        print(f"kuka-curriculum {command}: error: {error}", file=sys.stderr)
+        return 2
+    except failures as error:
+        print(f"kuka-curriculum {command}: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"kuka-curriculum {command}: {on_interrupt}", file=sys.stderr)
+        return 130

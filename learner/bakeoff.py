@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import argparse
 import functools
-import sys
 from pathlib import Path
 
 from common.kuka import ENV_IDS
-from learner.arguments import UsageError, add_override_flags, int_at_least, positive_int
+from learner.arguments import add_override_flags, int_at_least, positive_int, run_command
 from learner.bakeoff_report import (
     LEARNING_CURVES,
     PLACEMENT_PLOT,
@@ -144,17 +143,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        return _bakeoff(args)
-    except UsageError as error:
-        print(f"kuka-curriculum bakeoff: error: {error}", file=sys.stderr)
-        return 2
-    except RunFailed as error:
-        print(f"kuka-curriculum bakeoff: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("kuka-curriculum bakeoff: stopped; the same command resumes where it stopped", file=sys.stderr)
-        return 130
+    return run_command(
+        "bakeoff", _bakeoff, args, "stopped; the same command resumes where it stopped", failures=(RunFailed,)
+    )
 
 
 def _bakeoff(args: argparse.Namespace) -> int:

@@ -24,7 +24,7 @@ from pydantic import SecretStr
 
 from common.client.write_token import TOKEN_VARIABLE, token_problem
 from common.kuka import ENV_IDS
-from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int
+from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int, run_command
 from learner.config import LOOPS, TEACHERS, TrainConfig
 from learner.config_file import read_config_file
 
@@ -153,16 +153,7 @@ def curriculum_name(run_dir: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        return _train(args)
-    except UsageError as error:
-        print(f"kuka-curriculum train: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(
-            "kuka-curriculum train: stopped at once; the run resumes from its last periodic checkpoint", file=sys.stderr
-        )
-        return 130
+    return run_command("train", _train, args, "stopped at once; the run resumes from its last periodic checkpoint")
 
 
 def _train(args: argparse.Namespace) -> int:

@@ -16,7 +16,7 @@ from common.kuka.bullet import native_output_silenced
 from common.kuka.env import TIME_STEP, make_kuka_env
 from common.kuka.manual_control import ManualControl, Mode, Report, SliderPanel, describe, drive
 from common.kuka.task_space import task_space_for
-from learner.arguments import UsageError, positive_int
+from learner.arguments import UsageError, positive_int, run_command
 from learner.checkpoint_arguments import parse_task
 
 
@@ -48,14 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        return _control(args)
-    except UsageError as error:
-        print(f"kuka-curriculum control: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("kuka-curriculum control: stopped", file=sys.stderr)
-        return 130
+    return run_command("control", _control, args, "stopped")
 
 
 def _control(args: argparse.Namespace) -> int:

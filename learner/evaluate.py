@@ -11,12 +11,11 @@ against; without a checkpoint it plays alone, on ``--env``.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from common.kuka import ENV_IDS, HARD_V1_ENV_ID
 from common.kuka.task_space import task_space_for
-from learner.arguments import UsageError, positive_int
+from learner.arguments import UsageError, positive_int, run_command
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
 from learner.checkpoint_evaluation import (
     EvaluationResult,
@@ -72,14 +71,7 @@ def placement_line(result: EvaluationResult) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        return _evaluate(args)
-    except UsageError as error:
-        print(f"kuka-curriculum evaluate: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("kuka-curriculum evaluate: stopped; nothing was written", file=sys.stderr)
-        return 130
+    return run_command("evaluate", _evaluate, args, "stopped; nothing was written")
 
 
 def _evaluate(args: argparse.Namespace) -> int:
