@@ -34,8 +34,8 @@ import ray
 from common.client.teacher_client import TeacherClient
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.cli import curriculum_name
 from learner.config import PPOConfig, TrainConfig
+from learner.session import curriculum_name
 from learner.teacher_process import local_teacher_service
 from learner.trainer import IterationReport, Trainer
 

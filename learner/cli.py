@@ -10,34 +10,29 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import re
 import signal
-import socket
-import sys
 import time
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from pydantic import SecretStr
 
-from common.client.write_token import TOKEN_VARIABLE, token_problem
 from common.kuka import ENV_IDS
 from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int, run_command
 from learner.config import LOOPS, TEACHERS, TrainConfig
 from learner.config_file import read_config_file
+from learner.session import (
+    PUBLIC_URL_VARIABLE,
+    check_ray_reachable,
+    connect_ray,
+    curriculum_name,
+    launch_teacher,
+    register_curriculum,
+    token_from_environment,
+)
 
 DEFAULTS = TrainConfig()
-RAY_CONNECT_TIMEOUT_S = 5.0
-TEACHER_CONNECT_TIMEOUT_S = 10.0
-PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
-"""The teacher's address as a person's browser reaches it, when it differs from ``--teacher-url``
-(in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
-RAY_NAMESPACE = "kuka-curriculum"
-RAY_AUTH_MODE_VARIABLE = "RAY_AUTH_MODE"
-"""Unset, Ray turns token authentication on for a new local cluster and warns that it chose so; set to
-Ray's own choice before Ray is imported (it reads the mode once), it keeps that and drops the warning."""
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """Ctrl-C, and what ``docker stop`` and process managers send: both stop after a checkpoint, and a run
 stopped before its budget exits 128 + the signal's number (130, 143), as a shell reports a signal."""
@@ -146,12 +141,6 @@ def _config_from(args: argparse.Namespace, base: TrainConfig) -> TrainConfig:
     return replace(base, **overrides, teacher_overrides=teacher_overrides, ppo=base.ppo.with_overrides(ppo_values))
 
 
-def curriculum_name(run_dir: Path) -> str:
-    """The run directory's name, made into a valid curriculum name: one run, one curriculum."""
-    name = re.sub(r"[^A-Za-z0-9_.-]", "-", run_dir.resolve().name).lstrip("_.-")
-    return (name or "run")[:64]
-
-
 def run(args: argparse.Namespace) -> int:
     return run_command("train", _train, args, "stopped at once; the run resumes from its last periodic checkpoint")
 
@@ -159,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from learner.checkpoint import latest_checkpoint, load_checkpoint
 
-    token = _token_from_environment()
+    token = token_from_environment()
     checkpoint = None
     if args.resume or args.resume_if_exists:
         if args.run_dir is None:
@@ -184,112 +173,17 @@ def _train(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
 
     if args.ray_address is not None:
-        _check_reachable(args.ray_address)
+        check_ray_reachable(args.ray_address)
 
     with contextlib.ExitStack() as stack:
         # The curriculum is registered before Ray starts, so parameters the teacher refuses stop the
         # command at once; a tune, which registers in each trial, starts Ray while its service starts.
         teacher_url = launch_teacher(args.teacher_url, run_dir, stack)()
         name = curriculum_name(run_dir)
-        _register_curriculum(teacher_url, name, config, token)
+        register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         connect_ray(args.ray_address, config.workers, stack)
         return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
-
-
-def _token_from_environment() -> SecretStr | None:
-    """The teacher service's bearer token, from ``KC_TEACHER_TOKEN`` (never a flag: flags show in
-    ``ps``); refused before anything starts when it is a placeholder or too short to be secret."""
-    token = os.environ.get(TOKEN_VARIABLE) or None
-    if token is None:
-        return None
-    problem = token_problem(token)
-    if problem is not None:
-        raise UsageError(problem)
-    return SecretStr(token)
-
-
-def launch_teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) -> Callable[[], str]:
-    """A wait for the teacher service's URL: a service of its own in ``run_dir``, launched now so the
-    caller can start Ray while it starts, or the one at ``url``, checked at once so a wrong address
-    fails before Ray starts."""
-    from learner.teacher_process import launch_local_teacher_service
-
-    if url is None:
-        ready = launch_local_teacher_service(run_dir, stack)
-
-        def local_url() -> str:
-            try:
-                return ready()
-            except RuntimeError as error:
-                raise UsageError(str(error)) from None
-
-        return local_url
-    checked = _reachable_teacher(url)
-    return lambda: checked
-
-
-def _reachable_teacher(url: str) -> str:
-    url = url.rstrip("/")
-    import httpx
-
-    try:
-        httpx.get(f"{url}/healthz", timeout=TEACHER_CONNECT_TIMEOUT_S).raise_for_status()
-    except httpx.HTTPError as error:
-        raise UsageError(
-            f"cannot reach the teacher service at {url} ({error}); start it with "
-            "`kuka-curriculum serve` or leave out --teacher-url to start one"
-        ) from None
-    return url
-
-
-def _register_curriculum(url: str, name: str, config: TrainConfig, token: SecretStr | None) -> None:
-    from common.client.teacher_client import TeacherClient, TeacherClientError
-    from common.kuka.task_space import task_space_for
-
-    with TeacherClient(url, name, token=token) as client:
-        try:
-            client.register(
-                config.teacher,
-                task_space_for(config.env),
-                params=config.teacher_params,
-                seed=config.seed,
-                timeout=TEACHER_CONNECT_TIMEOUT_S,
-            )
-        except TeacherClientError as error:
-            raise UsageError(f"cannot register curriculum {name!r} at {url}: {error}") from None
-
-
-def _check_reachable(ray_address: str) -> None:
-    """Fail in seconds, not after Ray's own minute of retries, when nothing listens at the address."""
-    host, _, port = ray_address.removeprefix("ray://").rpartition(":")
-    try:
-        socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
-    except (OSError, ValueError) as error:
-        raise UsageError(
-            f"cannot reach Ray at {ray_address!r} ({error}); expected host:port of a running "
-            "cluster, or leave out --ray-address to start a local one"
-        ) from None
-
-
-def connect_ray(address: str | None, min_cpus: int, stack: contextlib.ExitStack) -> None:
-    """Join the cluster at ``address``, or start a local one counting at least ``min_cpus`` CPUs (so the
-    job's actors always fit), with Ray's token authentication chosen before Ray is first imported."""
-    import logging
-
-    if address is None and "ray" not in sys.modules:
-        os.environ.setdefault(RAY_AUTH_MODE_VARIABLE, "token")
-    import ray
-
-    options: dict[str, Any] = {"log_to_driver": False, "logging_level": logging.WARNING, "namespace": RAY_NAMESPACE}
-    try:
-        if address is None:
-            ray.init(num_cpus=max(min_cpus, os.cpu_count() or 1), include_dashboard=False, **options)
-        else:
-            ray.init(address=address, **options)
-    except (ConnectionError, RuntimeError, ValueError) as error:
-        raise UsageError(f"cannot connect to Ray at {address or 'a new local cluster'}: {error}") from None
-    stack.callback(ray.shutdown)
 
 
 def _run_training(

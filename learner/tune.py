@@ -28,7 +28,7 @@ from typing import Any, Literal
 from pydantic import SecretStr
 
 from common.kuka import ENV_IDS
-from learner import cli
+from learner import session
 from learner.arguments import UsageError, add_override_flags, positive_int, run_command
 from learner.config import TEACHERS, TrainConfig
 from learner.config_file import ConfigFile
@@ -217,20 +217,20 @@ def _tune(args: argparse.Namespace) -> int:
         )
     if settings.grace_steps is not None and settings.grace_steps > settings.total_steps:
         raise UsageError(f"--grace-steps {settings.grace_steps} is beyond --total-steps {settings.total_steps}")
-    token = cli._token_from_environment()
+    token = session.token_from_environment()
     if args.ray_address is not None:
-        cli._check_reachable(args.ray_address)
+        session.check_ray_reachable(args.ray_address)
     out = args.out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     if not args.resume:
         write_json(out / SETTINGS_FILE, asdict(settings))
 
     with contextlib.ExitStack() as stack:
-        teacher_ready = cli.launch_teacher(args.teacher_url, out, stack)
+        teacher_ready = session.launch_teacher(args.teacher_url, out, stack)
         # A local cluster counts at least one trial's CPUs, so one trial always fits and the others queue.
-        cli.connect_ray(args.ray_address, base.workers + 1, stack)
+        session.connect_ray(args.ray_address, base.workers + 1, stack)
         teacher_url = teacher_ready()
-        public_url = (args.public_url or os.environ.get(cli.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
+        public_url = (args.public_url or os.environ.get(session.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         from learner.tune_report import write_reports  # imports Ray, so after connect_ray has chosen its auth mode
 
         print(f"tune directory: {out}")
@@ -280,8 +280,8 @@ def train_trial(sampled: dict[str, Any], setup: TrialSetup) -> None:
     trial_id = tune.get_context().get_trial_id()
     config = apply_settings(setup.base, sampled)
     run_dir = setup.runs_dir / trial_id
-    name = cli.curriculum_name(Path(f"{setup.prefix}-{trial_id}"))
-    cli._register_curriculum(setup.teacher_url, name, config, setup.token)
+    name = session.curriculum_name(Path(f"{setup.prefix}-{trial_id}"))
+    session.register_curriculum(setup.teacher_url, name, config, setup.token)
     path = latest_checkpoint(run_dir)
     checkpoint = load_checkpoint(path) if path is not None else None
     trainer = Trainer(

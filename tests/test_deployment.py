@@ -32,9 +32,9 @@ import pytest
 import yaml
 
 from kuka_curriculum import COMMANDS
-from learner.cli import PUBLIC_URL_VARIABLE
-from learner.cli import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from learner.config import TrainConfig
+from learner.session import PUBLIC_URL_VARIABLE
+from learner.session import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from teacher_service.core.config import Settings
 
 ROOT = Path(__file__).resolve().parents[1]

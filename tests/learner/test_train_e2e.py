@@ -15,7 +15,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from common.client.schemas import API_PREFIX
 from learner.checkpoint import latest_checkpoint, load_checkpoint
-from learner.cli import curriculum_name
+from learner.session import curriculum_name
 from learner.teacher_process import local_teacher_service
 from teacher_service.process import free_port
 
