@@ -11,10 +11,7 @@ from typing import Any
 
 import gymnasium
 
-ENV_ID = "KukaGrasp-v0"
-HARD_ENV_ID = "KukaGraspHard-v0"
-HARD_V1_ENV_ID = "KukaGraspHard-v1"
-ENV_IDS = (ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID)
+from common.kuka.env_ids import ENV_ID, ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
 
 
 def _grasp_env(**kwargs: Any) -> gymnasium.Env[Any, Any]:
@@ -42,3 +39,5 @@ for _env_id, _entry_point in (
 ):
     if _env_id not in gymnasium.registry:
         gymnasium.register(id=_env_id, entry_point=_entry_point)
+
+__all__ = ["ENV_ID", "ENV_IDS", "HARD_ENV_ID", "HARD_V1_ENV_ID"]

@@ -31,9 +31,9 @@ import pybullet_data
 from gymnasium import spaces
 
 from common.client.task_space import Task, TaskSpace
-from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
 from common.kuka.bullet import direct_client, gui_client, pybullet
+from common.kuka.env_ids import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 
 TIME_STEP = 1.0 / 240.0

@@ -9,7 +9,7 @@ by chance on its screening seeds, as it did v0's (BENCHMARKS.md).
 from __future__ import annotations
 
 from common.client.task_space import Parameter, Task, TaskSpace
-from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
+from common.kuka.env_ids import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 
 DEFAULT_JP2 = 0.413184
 DEFAULT_JP4 = -1.589317
