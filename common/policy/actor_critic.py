@@ -24,6 +24,7 @@ from common.policy.inference import InferencePolicy as InferencePolicy
 from common.policy.inference import ObservationFeatures as ObservationFeatures
 from common.policy.inference import PolicySnapshot as PolicySnapshot
 from common.policy.inference import PolicySpec as PolicySpec
+from common.policy.normalizer import RunningNormalizer
 
 
 def _layer(in_features: int, out_features: int, gain: float) -> nn.Linear:
@@ -137,3 +138,17 @@ def numpy_copy(tensor: torch.Tensor) -> np.ndarray:
     """A tensor's values as a numpy array of their own (not sharing the parameter's memory)."""
     array: np.ndarray = tensor.detach().cpu().numpy().copy()
     return array
+
+
+def capture_snapshot(network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
+    """The network's current layers and the normaliser's statistics as plain numpy, for the rollout
+    workers (the learner's side: the one step from torch to a ``PolicySnapshot``)."""
+    return PolicySnapshot(
+        network.spec,
+        dense_layers(network.actor_mean),
+        dense_layers(network.critic),
+        None if network.spec.state_dependent_std else numpy_copy(network.actor_log_std),
+        normalizer.state(),
+        normalizer.clip,
+        version,
+    )

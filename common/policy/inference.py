@@ -2,7 +2,7 @@
 
 A worker process imports only this side of the policy (``actor_critic`` holds the torch network the
 learner trains), so a worker starts without loading torch: at start-up that import is most of a
-worker's time before its first step. ``PolicySnapshot.capture`` reads a network's layers on the
+worker's time before its first step. ``actor_critic.capture_snapshot`` reads a network's layers on the
 learner's side and is the one function here that needs torch, which it imports when called.
 """
 
@@ -11,16 +11,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.policy.noise import LOG_STD_BOUNDS
 from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState
-
-if TYPE_CHECKING:
-    from common.policy.actor_critic import ActorCritic
-    from common.policy.normalizer import RunningNormalizer
 
 
 @dataclass(frozen=True)
@@ -171,21 +166,6 @@ class PolicySnapshot:
     obs_clip: float
     version: int
 
-    @classmethod
-    def capture(cls, network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
-        """The network's current layers (the learner's side: this is the one place here that needs torch)."""
-        from common.policy.actor_critic import dense_layers, numpy_copy
-
-        return cls(
-            network.spec,
-            dense_layers(network.actor_mean),
-            dense_layers(network.critic),
-            None if network.spec.state_dependent_std else numpy_copy(network.actor_log_std),
-            normalizer.state(),
-            normalizer.clip,
-            version,
-        )
-
 
 _Stage = tuple[np.ndarray, np.ndarray, tuple[Callable[[np.ndarray], np.ndarray], ...]]
 """A ``DenseLayer`` ready to run: weight as (in, out) float32, so the layer is one ``x @ w + b``."""
@@ -198,7 +178,7 @@ class InferencePolicy:
     not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
     layers run as numpy; when the actor and critic heads have the same shape of layers they are
     fused into one block-diagonal stack when loaded (half the operations), and the observation
-    normaliser's scale is precomputed. The layers are those ``PolicySnapshot.capture`` read from the
+    normaliser's scale is precomputed. The layers are those ``actor_critic.capture_snapshot`` read from the
     network's modules, so a change to ``ActorCritic``'s heads needs no change here;
     ``ActorCritic.evaluate`` is the reference these numbers must match.
     """

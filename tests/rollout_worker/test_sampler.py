@@ -4,7 +4,7 @@ import pytest
 from common.client.task_space import Task
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
-from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySnapshot, PolicySpec
+from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySpec, capture_snapshot
 from common.policy.normalizer import RunningNormalizer
 from common.policy.trajectory import EpisodeStats
 from rollout_worker.sampler import Sampler, run_episodes
@@ -29,7 +29,7 @@ class RandomTasks:
 
 def make_policy(seed: int = 0) -> InferencePolicy:
     spec = PolicySpec(obs_dim=9, action_dim=3, hidden_sizes=(16, 16))
-    return InferencePolicy(PolicySnapshot.capture(ActorCritic(spec), RunningNormalizer(9), version=3), seed=seed)
+    return InferencePolicy(capture_snapshot(ActorCritic(spec), RunningNormalizer(9), version=3), seed=seed)
 
 
 @pytest.fixture()

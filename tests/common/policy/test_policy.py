@@ -6,7 +6,14 @@ import torch
 from torch import nn
 
 from common.kuka.bullet import pybullet
-from common.policy.actor_critic import ActorCritic, InferencePolicy, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.actor_critic import (
+    ActorCritic,
+    InferencePolicy,
+    ObservationFeatures,
+    PolicySnapshot,
+    PolicySpec,
+    capture_snapshot,
+)
 from common.policy.inference import WorldOffset
 from common.policy.normalizer import RunningNormalizer
 
@@ -28,7 +35,7 @@ def trained_looking(request):
 
 def test_inference_matches_the_training_network_on_normalised_observations(trained_looking):
     network, normalizer = trained_looking
-    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=7), seed=3)
+    policy = InferencePolicy(capture_snapshot(network, normalizer, version=7), seed=3)
     observations = np.random.default_rng(1).normal(50.0, 4.0, size=(6, 5)).astype(np.float32)
 
     actions, log_probs, values = policy.act(observations)
@@ -83,7 +90,7 @@ def test_inference_follows_networks_of_every_size(obs_dim, action_dim, hidden_si
     torch.manual_seed(1)
     spec = PolicySpec(obs_dim, action_dim, hidden_sizes, init_log_std=-0.7, angle_indices=angle_indices)
     network, normalizer = perturbed(ActorCritic(spec)), fitted_normalizer(spec)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
 
 def test_layers_added_to_the_network_are_followed_without_a_change_to_inference():
@@ -95,12 +102,12 @@ def test_layers_added_to_the_network_are_followed_without_a_change_to_inference(
     network.actor_mean.append(nn.Tanh())
     network.actor_mean.append(nn.Sequential(nn.Linear(2, 5), nn.Tanh(), nn.Tanh(), nn.Linear(5, 2)))
     network, normalizer = perturbed(network), fitted_normalizer(spec)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
     network.critic.insert(2, nn.Linear(8, 8))  # the critic deeper too, still not the actor's shape
     network.critic.insert(3, nn.Tanh())
     perturbed(network)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=1))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=1))
 
 
 def test_heads_with_the_same_depth_but_other_activations_each_keep_their_own():
@@ -109,7 +116,7 @@ def test_heads_with_the_same_depth_but_other_activations_each_keep_their_own():
     network = ActorCritic(spec)
     network.critic.insert(1, nn.Tanh())  # tanh(tanh(x)) after the critic's first layer only
     network, normalizer = perturbed(network), fitted_normalizer(spec)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
 
 @pytest.mark.parametrize(
@@ -120,13 +127,13 @@ def test_a_layer_inference_cannot_run_is_refused_when_the_policy_is_captured(mod
     network = ActorCritic(spec)
     network.critic.insert(1, module)
     with pytest.raises(TypeError, match=type(module).__name__):
-        PolicySnapshot.capture(network, RunningNormalizer(spec.feature_dim), version=0)
+        capture_snapshot(network, RunningNormalizer(spec.feature_dim), version=0)
 
 
 def test_a_snapshot_acts_the_same_after_crossing_a_process_boundary(trained_looking):
     """Ray and the evaluation pool pickle snapshots; the layers' activations must survive that."""
     network, normalizer = trained_looking
-    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    snapshot = capture_snapshot(network, normalizer, version=0)
     observations = np.random.default_rng(4).normal(50.0, 4.0, size=(4, 5)).astype(np.float32)
 
     original = InferencePolicy(snapshot, seed=9).act(observations)
@@ -138,14 +145,14 @@ def test_a_snapshot_acts_the_same_after_crossing_a_process_boundary(trained_look
 
 def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(trained_looking):
     network, normalizer = trained_looking
-    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    snapshot = capture_snapshot(network, normalizer, version=0)
     observations = np.zeros((3, 5), dtype=np.float32)
     first, again = InferencePolicy(snapshot, seed=11), InferencePolicy(snapshot, seed=11)
     assert np.array_equal(first.act(observations)[0], again.act(observations)[0])
 
     with torch.no_grad():
         network.actor_mean[0].bias.add_(1.0)
-    again.load(PolicySnapshot.capture(network, normalizer, version=1))
+    again.load(capture_snapshot(network, normalizer, version=1))
     assert not np.allclose(
         first.act(observations, deterministic=True)[0], again.act(observations, deterministic=True)[0]
     )
@@ -154,12 +161,12 @@ def test_the_same_seed_draws_the_same_actions_and_new_weights_change_them(traine
 
 def test_a_snapshot_of_another_shape_is_refused(trained_looking):
     network, normalizer = trained_looking
-    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0))
+    policy = InferencePolicy(capture_snapshot(network, normalizer, version=0))
     other = ActorCritic(
         PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(4,), angle_indices=network.spec.angle_indices)
     )
     with pytest.raises(ValueError, match="snapshot is for"):
-        policy.load(PolicySnapshot.capture(other, normalizer, version=1))
+        policy.load(capture_snapshot(other, normalizer, version=1))
 
 
 def test_an_angle_either_side_of_the_wrap_gives_nearly_the_same_features():
@@ -198,7 +205,7 @@ def test_inference_matches_the_training_network_with_a_world_offset():
     assert spec.feature_dim == 6 + 3 + 2
     network = perturbed(ActorCritic(spec))
     normalizer = fitted_normalizer(spec)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
 
 @pytest.mark.parametrize(
@@ -232,7 +239,7 @@ def test_inference_matches_the_training_network_with_a_half_turn_angle():
     spec = PolicySpec(obs_dim=5, action_dim=2, hidden_sizes=(8, 8), angle_indices=(0, 4), half_turn_indices=(4,))
     network = perturbed(ActorCritic(spec))
     normalizer = fitted_normalizer(spec)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
 
 @pytest.mark.parametrize("half_turns", [(2,), (3, 3), (7,)])
@@ -269,7 +276,7 @@ def test_inference_follows_a_state_dependent_std(fusable):
     if not fusable:
         network.critic.insert(1, nn.Tanh())
     network, normalizer = perturbed(network), fitted_normalizer(spec)
-    snapshot = PolicySnapshot.capture(network, normalizer, version=0)
+    snapshot = capture_snapshot(network, normalizer, version=0)
     assert snapshot.log_std is None
     assert_matches_the_network(network, normalizer, snapshot)
 
@@ -290,12 +297,12 @@ def test_a_state_dependent_log_std_is_clamped_in_training_and_inference_alike(bi
     inputs = torch.from_numpy(normalizer.normalize(observations))
     assert network.mean_and_log_std(inputs)[1].detach().numpy() == pytest.approx(expected)
 
-    policy = InferencePolicy(PolicySnapshot.capture(network, normalizer, version=0), seed=1)
+    policy = InferencePolicy(capture_snapshot(network, normalizer, version=0), seed=1)
     actions, _, _ = policy.act(observations)
     mean, _, _ = policy.act(observations, deterministic=True)
     spread = np.random.default_rng(1).standard_normal(actions.shape, dtype=np.float32) * np.exp(expected)
     assert actions - mean == pytest.approx(spread, rel=1e-4, abs=1e-5)
-    assert_matches_the_network(network, normalizer, PolicySnapshot.capture(network, normalizer, version=0))
+    assert_matches_the_network(network, normalizer, capture_snapshot(network, normalizer, version=0))
 
 
 def test_a_log_std_floor_outside_the_clamp_is_refused():
