@@ -57,13 +57,13 @@ def _render() -> CommandModule:
 
 
 def _bakeoff() -> CommandModule:
-    from learner import bakeoff
+    from learner.experiments import bakeoff
 
     return bakeoff
 
 
 def _tune() -> CommandModule:
-    from learner import tune
+    from learner.experiments import tune
 
     return tune
 

@@ -34,10 +34,10 @@ import ray
 from common.client.teacher_client import TeacherClient
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.config import PPOConfig, TrainConfig
+from learner.core.config import PPOConfig, TrainConfig
+from learner.core.trainer import IterationReport, Trainer
 from learner.session import curriculum_name
 from learner.teacher_process import local_teacher_service
-from learner.trainer import IterationReport, Trainer
 
 TEACHER = "fixed"
 MEASURED_STEPS_PER_ENV = 5120

@@ -8,7 +8,8 @@ prints, per family and policy, both sides' success counts and every episode whos
 length differ, and exits 1 if any success flag does.
 
 Policies: ``zero`` (no action), ``random`` (uniform, seeded per episode), ``scripted`` (the hand-made
-controller of ``bench/task_hardness.py``) and ``checkpoint`` (the deterministic policy of ``--checkpoint``).
+controller of ``learner/experiments/task_hardness.py``) and ``checkpoint`` (the deterministic policy of
+``--checkpoint``).
 
     .venv/bin/python bench/episode_equivalence.py --episodes 1000 --processes 2
 """
@@ -43,17 +44,16 @@ Episode = tuple[bool, float, int]
 
 def play_chunk(env_id: str, policy: str, checkpoint: str, seeds: list[int]) -> list[Episode]:
     """Episodes of one policy on the family's hardest task, with whichever ``common`` this process imports."""
-    sys.path.insert(0, str(ROOT / "bench"))
-    from task_hardness import episode_policy
-
+    sys.path.append(str(ROOT))  # last, so that a baseline's ``common`` on PYTHONPATH comes first
     from common.kuka.env import make_kuka_env
+    from learner.experiments.task_hardness import episode_policy
 
     env = make_kuka_env(env_id)
     network = None
     if policy == "checkpoint":
         from common.policy.actor_critic import InferencePolicy
-        from learner.checkpoint import load_checkpoint
-        from learner.kuka_policy import policy_snapshot
+        from learner.core.checkpoint import load_checkpoint
+        from learner.core.kuka_policy import policy_snapshot
 
         network = InferencePolicy(policy_snapshot(load_checkpoint(Path(checkpoint))))
     episodes = []

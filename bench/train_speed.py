@@ -47,7 +47,7 @@ from common.client.task_space import Task
 from common.kuka import ENV_IDS
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.config import LOOPS, TrainConfig
+from learner.core.config import LOOPS, TrainConfig
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.store import Store
 

@@ -33,7 +33,7 @@ from common.client.teacher_client import TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
-from learner.config import kuka_teacher_params
+from learner.core.config import kuka_teacher_params
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

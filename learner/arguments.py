@@ -53,7 +53,7 @@ def add_override_flags(
     pairs; ``scope`` ends their help ('for this run', 'for every run'), ``teacher_param`` starts the first's."""
     for flag, dest, what in (
         ("--teacher-param", "teacher_params", teacher_param),
-        ("--ppo", "ppo", "a PPO hyperparameter, a PPOConfig field in learner/config.py (e.g. entropy_coef=0.001)"),
+        ("--ppo", "ppo", "a PPO hyperparameter, a PPOConfig field in learner/core/config.py (e.g. entropy_coef=0.001)"),
     ):
         group.add_argument(
             flag,

@@ -10,7 +10,7 @@ from pathlib import Path
 from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
 from learner.arguments import UsageError
-from learner.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
+from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 
 TASK_HELP = (
     "'hardest' (the evaluation setting of the checkpoint's environment; for KukaGrasp-v0 the book's), 'easiest', "

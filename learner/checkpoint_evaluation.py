@@ -32,10 +32,10 @@ from common.kuka.scripted import scripted_action
 from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats
-from learner.checkpoint import Checkpoint
+from learner.core.checkpoint import Checkpoint
+from learner.core.kuka_policy import policy_snapshot
 from learner.episode_diagnostics import success_by_band
 from learner.json_file import write_json
-from learner.kuka_policy import policy_snapshot
 from learner.process_pool import StoppablePool
 from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 

@@ -18,10 +18,9 @@ from typing import Any
 
 from pydantic import SecretStr
 
-from common.kuka import ENV_IDS
 from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int, run_command
-from learner.config import LOOPS, TEACHERS, TrainConfig
 from learner.config_file import read_config_file
+from learner.core.config import TEACHERS, TrainConfig
 from learner.session import (
     PUBLIC_URL_VARIABLE,
     check_ray_reachable,
@@ -31,6 +30,7 @@ from learner.session import (
     register_curriculum,
     token_from_environment,
 )
+from learner.training_flags import add_training_flags
 
 DEFAULTS = TrainConfig()
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -47,33 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
     run.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        help=f"task family: the environment and its task space, whose hardest task is evaluated "
-        f"(default {DEFAULTS.env})",
-    )
-    run.add_argument(
         "--total-steps", type=positive_int, help=f"environment steps to train for (default {DEFAULTS.total_steps:_})"
-    )
-    run.add_argument("--workers", type=positive_int, help=f"rollout actors (default {DEFAULTS.workers})")
-    run.add_argument(
-        "--envs-per-worker", type=positive_int, help=f"environments per actor (default {DEFAULTS.envs_per_worker})"
-    )
-    run.add_argument(
-        "--rollout-length",
-        type=positive_int,
-        help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})",
-    )
-    run.add_argument(
-        "--max-episode-steps", type=positive_int, help=f"episode step limit (default {DEFAULTS.max_episode_steps})"
     )
     run.add_argument(
         "--seed", type=int, help=f"seed for the network, environments and teacher (default {DEFAULTS.seed})"
-    )
-    run.add_argument(
-        "--checkpoint-every",
-        type=positive_int,
-        help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})",
     )
     run.add_argument(
         "--eval-every",
@@ -84,12 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
     add_override_flags(run, "for this run")
-    run.add_argument(
-        "--loop",
-        choices=LOOPS,
-        help="async: workers sample while the learner updates, one update behind; sync: strictly on-policy, "
-        f"evaluations pause training (default {DEFAULTS.loop})",
-    )
+    add_training_flags(run, defaults_given=False)
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
     resume = where.add_mutually_exclusive_group()
@@ -146,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from learner.checkpoint import latest_checkpoint, load_checkpoint
+    from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 
     token = token_from_environment()
     checkpoint = None
@@ -197,8 +169,8 @@ def _run_training(
 ) -> int:
     from tqdm import tqdm
 
+    from learner.core.trainer import IterationReport, Trainer
     from learner.teacher_status import TeacherStatus
-    from learner.trainer import IterationReport, Trainer
 
     trainer = Trainer(
         config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint, actor_name_prefix=name

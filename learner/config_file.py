@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from learner.config import TrainConfig
+from learner.core.config import TrainConfig
 
 SETTINGS = ("teacher", "env", "workers", "envs_per_worker", "max_episode_steps", "loop")
 """``TrainConfig`` fields a settings file may set."""

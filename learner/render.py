@@ -25,7 +25,7 @@ from common.kuka.env import KukaGraspEnv, make_kuka_env
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from learner.arguments import UsageError, positive_int
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
-from learner.kuka_policy import policy_snapshot
+from learner.core.kuka_policy import policy_snapshot
 
 STEPS_PER_FRAME = 8
 """A step is 1/240 s of physics: one frame in eight plays at real speed (30 frames per second)."""

@@ -18,7 +18,7 @@ from pydantic import SecretStr
 
 from common.client.write_token import TOKEN_VARIABLE, token_problem
 from learner.arguments import UsageError
-from learner.config import TrainConfig
+from learner.core.config import TrainConfig
 
 RAY_CONNECT_TIMEOUT_S = 5.0
 TEACHER_CONNECT_TIMEOUT_S = 10.0

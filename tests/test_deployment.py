@@ -32,7 +32,7 @@ import pytest
 import yaml
 
 from kuka_curriculum import COMMANDS
-from learner.config import TrainConfig
+from learner.core.config import TrainConfig
 from learner.session import PUBLIC_URL_VARIABLE
 from learner.session import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from teacher_service.core.config import Settings

@@ -88,3 +88,90 @@ def test_no_module_imports_by_string():
 def test_each_package_says_its_job(init: Path):
     docstring = ast.get_docstring(ast.parse(init.read_text()))
     assert docstring and len(docstring.split()) >= 5, f"{module_name(init)} needs a docstring that says its one job"
+
+
+def module_paths() -> dict[str, Path]:
+    return {module_name(path): path for path in sources()}
+
+
+def imported_modules(importer: str, tree: ast.AST, modules: set[str]) -> set[str]:
+    """The first-party modules ``importer`` uses: ``from package import module`` names the module, ``from module
+    import name`` the module; the package ``__init__`` that every import passes through is not counted."""
+    used = set()
+    for name in first_party_imports(tree):
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        if name and name != importer:
+            used.add(name)
+    return used
+
+
+def import_graph() -> dict[str, set[str]]:
+    paths = module_paths()
+    modules = set(paths)
+    return {module: imported_modules(module, ast.parse(path.read_text()), modules) for module, path in paths.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each a cycle or a knot of them."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for target in sorted(graph.get(module, ())):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in on_stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == module:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return found
+
+
+def test_no_import_cycles_function_level_imports_included():
+    assert not cycles(import_graph()), "modules that import each other, directly or around a loop"
+
+
+def test_the_cycle_finder_finds_a_planted_cycle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert cycles(graph) == [["a", "b", "c"]]
+
+
+LEARNER_MAY_NOT_IMPORT = {
+    "learner.core": ("learner.",),
+    "learner": ("learner.experiments",),
+}
+"""Inside the learner: its core imports nothing else of the learner; the commands and the session around it
+never import the experiments, which sit on top (only the dispatcher loads them)."""
+
+
+def test_the_learner_core_stands_alone_and_only_the_dispatcher_loads_the_experiments():
+    wrong = []
+    for module, targets in import_graph().items():
+        if not module.startswith("learner") or module.startswith("learner.experiments"):
+            continue
+        layer = "learner.core" if module.startswith("learner.core") else "learner"
+        for target in targets:
+            inside_core = layer == "learner.core" and target.startswith("learner.core")
+            if not inside_core and target.startswith(LEARNER_MAY_NOT_IMPORT[layer]):
+                wrong.append(f"{module} imports {target}")
+    assert not wrong, "imports against the learner's layers:\n" + "\n".join(sorted(wrong))

@@ -15,7 +15,7 @@ from typing import Any
 
 import torch
 
-from learner.config import TrainConfig
+from learner.core.config import TrainConfig
 
 CHECKPOINT_DIR = "checkpoints"
 

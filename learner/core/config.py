@@ -136,16 +136,14 @@ KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
     "currot": {"delta": 5.0, "estimate": "recent"},
 }
 """Teacher parameters for the KUKA curriculum, on top of each teacher's own defaults. ALP-GMM
-clusters learning progress together with task coordinates rescaled to [0, 1]; mapping the scaled
-return (about -3 for a miss, about +9 for a grasp) onto [0, 1] puts progress on the same scale.
-A fifth of its tasks are the hardest task: its other tasks rarely place the block in the outer
-part of the test's range, and without them one seed in three ended under 80% (BENCHMARKS.md, issue 18).
-ADR and self-paced map a KUKA return onto [0, 1] by [0, 10] (a grasp pays about +10) when a result
-carries no success, the lesson plan moves on at the book's mean reward of 5.5, and CURROT holds a
-return to 5 (half a grasp) when results carry no success: the kinds' own defaults learn the scale
-from the returns seen instead (issue 48). CURROT estimates from the last results, not its authors'
-lasting success buffer, which on KukaGraspHard-v1 held its estimate at the bar while the student
-succeeded 10 to 17% of the time (8% against 66% after 6M steps on one seed, BENCHMARKS.md, issue 44)."""
+clusters learning progress together with task coordinates rescaled to [0, 1], so the scaled return
+(about -3 for a miss, about +9 for a grasp) is mapped onto [0, 1] too, and a fifth of its tasks are
+the hardest task, which its other tasks rarely reach in the outer part of the test's range. ADR and
+self-paced map a KUKA return onto [0, 1] by [0, 10] (a grasp pays about +10) when a result carries no
+success, the lesson plan moves on at the book's mean reward of 5.5, and CURROT holds a return to 5
+(half a grasp) and estimates from its recent results rather than its authors' lasting success
+buffer. Why each, with the runs that chose them: docs/results/bakeoff-v0.md and
+docs/results/bakeoff-hard.md."""
 
 
 def kuka_teacher_params(teacher: str, overrides: Mapping[str, Any]) -> dict[str, Any]:

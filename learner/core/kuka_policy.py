@@ -6,9 +6,9 @@ from __future__ import annotations
 from common.kuka.env import BLOCK_XY_IN_GRIPPER, BLOCK_YAW_INDEX, GRIPPER_EULER_INDICES, KukaGraspEnv
 from common.policy.actor_critic import PolicySnapshot, PolicySpec
 from common.policy.inference import WorldOffset
-from learner.checkpoint import Checkpoint
-from learner.config import PPOConfig
-from learner.ppo import PPOLearner
+from learner.core.checkpoint import Checkpoint
+from learner.core.config import PPOConfig
+from learner.core.ppo import PPOLearner
 
 BLOCK_OFFSET = WorldOffset(BLOCK_XY_IN_GRIPPER.start, BLOCK_XY_IN_GRIPPER.start + 1, GRIPPER_EULER_INDICES)
 """The block's (x, y) in the gripper's frame, which ``PPOConfig.world_block_offset`` turns into the world's."""

@@ -13,10 +13,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from common.policy.actor_critic import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec
+from common.policy.actor_critic import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec, capture_snapshot
 from common.policy.normalizer import NormalizerState, RunningNormalizer
 from common.policy.trajectory import TrajectoryBatch
-from learner.config import PPOConfig
+from learner.core.config import PPOConfig
 
 
 def compute_advantages(batch: TrajectoryBatch, gamma: float, gae_lambda: float) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +116,7 @@ class PPOLearner:
         self.version = 0
 
     def snapshot(self) -> PolicySnapshot:
-        return PolicySnapshot.capture(self.network, self.normalizer, self.version)
+        return capture_snapshot(self.network, self.normalizer, self.version)
 
     def update(
         self, batches: Sequence[TrajectoryBatch], progress: float = 0.0, max_policy_lag: int = 0

@@ -33,12 +33,12 @@ from pydantic import SecretStr
 
 from common.policy.actor_critic import PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
-from learner.checkpoint import Checkpoint, Counters, save_checkpoint
-from learner.config import TrainConfig
-from learner.kuka_policy import kuka_policy_spec
-from learner.metrics import MetricsLog
-from learner.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
-from learner.ppo import PPOLearner
+from learner.core.checkpoint import Checkpoint, Counters, save_checkpoint
+from learner.core.config import TrainConfig
+from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.metrics import MetricsLog
+from learner.core.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
+from learner.core.ppo import PPOLearner
 from rollout_worker.actor import WorkerSettings
 from rollout_worker.pool import InFlight, WorkerPool
 

@@ -4,11 +4,11 @@ given ``align_margin`` would count. It is the measurement behind ``KukaGraspHard
 Each policy plays the family's hardest point with ``align_margin`` 90, so every lift counts and the
 episode's last ``info`` gives the fingers' angle from square at touchdown; the margin does not enter the
 observation, so a policy plays exactly as it would under any margin. A policy is one of
-``bench/task_hardness.py``'s fixed ones (``zero``, ``random``, ``drift``, ``scripted``) or a checkpoint
+``learner/experiments/task_hardness.py``'s fixed ones (``zero``, ``random``, ``drift``, ``scripted``) or a checkpoint
 (a ``.pt`` file or a run directory: its latest checkpoint, played deterministically, as ``evaluate`` does).
 
-    .venv/bin/python bench/alignment_at_touchdown.py drift scripted benchmarks/bakeoff-hard/bakeoff/runs/currot-seed0 \\
-        --episodes 1000 --seed 30000 --processes 2
+    .venv/bin/python -m learner.experiments.alignment_at_touchdown drift scripted \\
+        benchmarks/bakeoff-hard/bakeoff/runs/currot-seed0 --episodes 1000 --seed 30000 --processes 2
 
 Prints, per policy, the lifts and how many of them each margin counts (Wilson 95% intervals over the
 episodes), and the quartiles of the touchdown angle over the lifts. Then, per policy, where the episodes
@@ -27,9 +27,6 @@ from typing import Any
 import numpy as np
 import torch
 
-# A sibling script (bench/ is the script's path, not a package).
-from task_hardness import CHUNK, POLICIES, Policy, episode_policy
-
 from common.client.task_space import Task
 from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.diagnostics import play_episode
@@ -37,7 +34,8 @@ from common.kuka.env import make_kuka_env
 from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
 from common.policy.actor_critic import InferencePolicy
 from learner.checkpoint_arguments import read_checkpoint
-from learner.kuka_policy import policy_snapshot
+from learner.core.kuka_policy import policy_snapshot
+from learner.experiments.task_hardness import CHUNK, POLICIES, Policy, episode_policy
 from learner.process_pool import StoppablePool
 from learner.stats import wilson_interval
 
@@ -61,7 +59,8 @@ def play_chunk(env_id: str, task: Task, policy: str, seeds: list[int]) -> list[T
 
     def deterministic(observation: np.ndarray) -> np.ndarray:
         assert network is not None
-        return np.clip(network.act(observation[None], deterministic=True)[0][0], -1.0, 1.0)
+        action: np.ndarray = np.clip(network.act(observation[None], deterministic=True)[0][0], -1.0, 1.0)
+        return action
 
     episodes = []
     try:

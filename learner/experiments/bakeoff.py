@@ -14,9 +14,11 @@ import argparse
 import functools
 from pathlib import Path
 
-from common.kuka import ENV_IDS
 from learner.arguments import add_override_flags, int_at_least, positive_int, run_command
-from learner.bakeoff_report import (
+from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
+from learner.config_file import BakeoffConfigAction
+from learner.core.config import TEACHERS, TrainConfig
+from learner.experiments.bakeoff_report import (
     LEARNING_CURVES,
     PLACEMENT_PLOT,
     RESULTS_JSON,
@@ -24,7 +26,7 @@ from learner.bakeoff_report import (
     SCRIPTED_EVALUATION,
     write_reports,
 )
-from learner.bakeoff_runs import (
+from learner.experiments.bakeoff_runs import (
     TRAINING_FLAGS,
     Run,
     RunFailed,
@@ -36,11 +38,9 @@ from learner.bakeoff_runs import (
     teacher_params_by_kind,
     train_runs,
 )
-from learner.bakeoff_statistics import TeacherResult
-from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
-from learner.config import LOOPS, TEACHERS, TrainConfig
-from learner.config_file import BakeoffConfigAction
-from learner.run_archive import archive_run
+from learner.experiments.bakeoff_statistics import TeacherResult
+from learner.experiments.run_archive import archive_run
+from learner.training_flags import add_training_flags
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -76,39 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     evaluation.add_argument("--eval-seed", type=int, default=0, help="episode i is seeded eval-seed + i (default 0)")
     evaluation.add_argument("--eval-processes", type=positive_int, help="evaluation processes (default: one per CPU)")
     training = parser.add_argument_group("training, the same for every run")
-    training.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=defaults.env,
-        help=f"task family; each run's final evaluation is its hardest task (default {defaults.env})",
-    )
-    training.add_argument(
-        "--workers", type=positive_int, default=defaults.workers, help=f"rollout actors (default {defaults.workers})"
-    )
-    training.add_argument(
-        "--envs-per-worker",
-        type=positive_int,
-        default=defaults.envs_per_worker,
-        help=f"environments per actor (default {defaults.envs_per_worker})",
-    )
-    training.add_argument(
-        "--rollout-length",
-        type=positive_int,
-        default=defaults.ppo.rollout_length,
-        help=f"steps per environment per iteration (default {defaults.ppo.rollout_length})",
-    )
-    training.add_argument(
-        "--max-episode-steps",
-        type=positive_int,
-        default=defaults.max_episode_steps,
-        help=f"episode step limit (default {defaults.max_episode_steps})",
-    )
-    training.add_argument(
-        "--checkpoint-every",
-        type=positive_int,
-        default=defaults.checkpoint_every,
-        help=f"iterations between checkpoints (default {defaults.checkpoint_every})",
-    )
+    add_training_flags(training, defaults_given=True)
     training.add_argument(
         "--curve-every",
         type=int_at_least(0),
@@ -120,9 +88,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_int,
         default=defaults.eval_episodes,
         help=f"episodes per learning-curve evaluation (default {defaults.eval_episodes})",
-    )
-    training.add_argument(
-        "--loop", choices=LOOPS, default=defaults.loop, help=f"training loop (default {defaults.loop})"
     )
     training.add_argument(
         "--config",

@@ -16,8 +16,11 @@ from common.kuka import ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import task_space_for
-from learner.bakeoff_runs import learning_curve
-from learner.bakeoff_statistics import (
+from learner.checkpoint_evaluation import EvaluationResult
+from learner.core.config import TrainConfig
+from learner.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
+from learner.experiments.bakeoff_runs import learning_curve
+from learner.experiments.bakeoff_statistics import (
     CURVE_WINDOW,
     HALF_SUCCESS,
     STEP_TARGETS,
@@ -25,9 +28,6 @@ from learner.bakeoff_statistics import (
     TeacherResult,
     median_steps,
 )
-from learner.checkpoint_evaluation import EvaluationResult
-from learner.config import TrainConfig
-from learner.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
 from learner.json_file import write_json
 from learner.stats import CONFIDENCE, Interval
 

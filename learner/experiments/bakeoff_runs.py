@@ -28,11 +28,11 @@ from tqdm import tqdm
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.arguments import UsageError
-from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
-from learner.config import TrainConfig
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.core.config import TrainConfig
+from learner.experiments.run_archive import TRAIN_LOG, metrics_records, restore_run
 from learner.json_file import write_json
-from learner.run_archive import TRAIN_LOG, metrics_records, restore_run
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"

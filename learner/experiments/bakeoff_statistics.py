@@ -14,8 +14,8 @@ import numpy as np
 
 from common.kuka import ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.bakeoff_runs import Run, learning_curve
 from learner.checkpoint_evaluation import EvaluationResult
+from learner.experiments.bakeoff_runs import Run, learning_curve
 from learner.stats import Interval, mean_interval, wilson_interval
 
 SUCCESS_TARGET = 0.8

@@ -25,7 +25,7 @@ must share it. Writes plots and a markdown summary:
   ``KukaGraspHard-v0`` ``obj_far`` moves the block toward a point drawn after those uniforms, so
   they no longer say where it lies, and the section is left out.
 
-    .venv/bin/python bench/curriculum_diagnostics.py runs/bakeoff/runs/* --out benchmarks/diagnostics
+    .venv/bin/python -m learner.experiments.curriculum_diagnostics runs/bakeoff/runs/* --out benchmarks/diagnostics
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ from matplotlib.figure import Figure
 
 from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
-from learner.config import TrainConfig
-from learner.run_archive import exists, metrics_records, unpacked
+from learner.core.config import TrainConfig
+from learner.experiments.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
+from learner.experiments.run_archive import exists, metrics_records, unpacked
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.store import Store
@@ -114,11 +114,13 @@ class RunData:
     @property
     def band(self) -> np.ndarray:
         """Difficulty quartile (see ``band_edges``) of the mean hardness over parameters."""
-        return np.digitize(self.hardness.mean(axis=1), band_edges(self.space))
+        bands: np.ndarray = np.digitize(self.hardness.mean(axis=1), band_edges(self.space))
+        return bands
 
     @property
     def window(self) -> np.ndarray:
-        return np.minimum(self.step * WINDOWS // max(self.total_steps, 1), WINDOWS - 1)
+        windows: np.ndarray = np.minimum(self.step * WINDOWS // max(self.total_steps, 1), WINDOWS - 1)
+        return windows
 
 
 def load_run(run_dir: Path) -> RunData:

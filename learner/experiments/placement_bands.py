@@ -8,7 +8,8 @@ must have played the same episode seeds, so each row is read on the same placeme
     for k in 0 1 2 3 4; do .venv/bin/kuka-curriculum evaluate benchmarks/bakeoff-hard/bakeoff-v1/runs/currot-seed$k \\
         --episodes 100 --seed 100000 --json /tmp/currot-seed$k.json; done
     .venv/bin/kuka-curriculum evaluate --scripted --episodes 100 --seed 100000 --json /tmp/scripted.json
-    .venv/bin/python bench/placement_bands.py /tmp/currot-seed*.json /tmp/scripted.json --plot /tmp/bands.png
+    .venv/bin/python -m learner.experiments.placement_bands /tmp/currot-seed*.json /tmp/scripted.json \\
+        --plot /tmp/bands.png
 
 A bake-off's own ``runs/<teacher>-seed<k>/evaluation.json`` holds no ``teacher`` key: its directory
 names the teacher.
@@ -24,10 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
-from learner.bakeoff_runs import Run
 from learner.checkpoint_evaluation import pooled_episodes
 from learner.episode_diagnostics import band_table, plot_bands
+from learner.experiments.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
+from learner.experiments.bakeoff_runs import Run
 
 Rows = dict[str, list[list[tuple[EpisodeDiagnostics, bool]]]]
 """Per row label, each file's diagnosed episodes."""

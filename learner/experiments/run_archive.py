@@ -25,8 +25,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from learner.checkpoint import CHECKPOINT_DIR, latest_checkpoint
-from learner.metrics import METRICS_FILE
+from learner.core.checkpoint import CHECKPOINT_DIR, latest_checkpoint
+from learner.core.metrics import METRICS_FILE
 
 SUFFIX = ".xz"
 TRAIN_LOG = "train.log"

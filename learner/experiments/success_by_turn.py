@@ -1,5 +1,5 @@
 """Success by how the block lies turned and how near the arm, from ``evaluate --json`` files: where a
-policy misses that the placement bands (``bench/placement_bands.py``, by distance beyond the clamp) do not
+policy misses that the placement bands (``learner/experiments/placement_bands.py``, by distance beyond the clamp) do not
 separate.
 
 A block looks the same turned half a turn, so its yaw is read modulo a half turn, in [-90, 90) degrees:
@@ -9,8 +9,8 @@ file is one column (its run directory's name, or the file's): success (episodes)
 from the gripper's axis to the block at touchdown, and where the file recorded it, the median turn of the
 wrist at touchdown (signed as the yaw actions add up).
 
-    .venv/bin/python bench/success_by_turn.py benchmarks/bakeoff-hard/*/runs/currot-seed0/evaluation.json \\
-        /tmp/scripted.json
+    .venv/bin/python -m learner.experiments.success_by_turn \\
+        benchmarks/bakeoff-hard/*/runs/currot-seed0/evaluation.json /tmp/scripted.json
 """
 
 from __future__ import annotations

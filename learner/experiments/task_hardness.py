@@ -11,7 +11,7 @@ of the family, from the easiest to the hardest:
 - ``scripted``: a hand-made controller that reads only the observation, moves the gripper over the
   block and turns the wrist across it: it shows the point can be solved, not how well PPO can.
 
-    .venv/bin/python bench/task_hardness.py --env KukaGraspHard-v0 --episodes 1000 --processes 2
+    .venv/bin/python -m learner.experiments.task_hardness --env KukaGraspHard-v0 --episodes 1000 --processes 2
 
 Prints, per point and policy, the success rate (Wilson 95% interval), the mean return and the mean
 episode length; ``--json`` also writes them.

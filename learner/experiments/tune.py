@@ -21,30 +21,29 @@ import contextlib
 import json
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import SecretStr
 
 from common.kuka import ENV_IDS
 from learner import session
 from learner.arguments import UsageError, add_override_flags, positive_int, run_command
-from learner.config import TEACHERS, TrainConfig
-from learner.config_file import ConfigFile
+from learner.core.config import TEACHERS, TrainConfig
+from learner.experiments.tune_settings import (
+    ASHA_REDUCTION,
+    DEFAULTS,
+    EXPERIMENT,
+    MAX_TRIALS,
+    METRICS,
+    RUNS_DIR,
+    SCHEDULERS,
+    SETTINGS_FILE,
+    TuneSettings,
+)
+from learner.experiments.tune_space import SearchSpace, SearchSpaceError, apply_settings
 from learner.json_file import write_json
-from learner.tune_space import SearchSpace, SearchSpaceError, apply_settings, parse_search_space
-
-SETTINGS_FILE = "tune.json"
-EXPERIMENT = "tune"
-RUNS_DIR = "runs"
-SCHEDULERS = ("asha", "none")
-METRICS: dict[str, str] = {"success": "eval/success_rate", "return": "eval/return"}
-"""The metric a tune ranks by, and the in-run evaluation it comes from (the hardest task)."""
-ASHA_REDUCTION = 3
-MAX_TRIALS = 1000
-"""The most trials one tune may run, grids included: a search space file cannot ask for an unbounded cost."""
-DEFAULTS = TrainConfig()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -98,48 +97,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--public-url", help="the teacher's address in the printed dashboard link")
 
 
-@dataclass(frozen=True)
-class TuneSettings:
-    """What defines a tune, saved in ``tune.json`` so ``--resume`` carries on with the same."""
-
-    search_space: dict[str, Any]
-    env: str = DEFAULTS.env
-    teacher: str = DEFAULTS.teacher
-    trials: int = 8
-    total_steps: int = 200_000
-    scheduler: Literal["asha", "none"] = "asha"
-    grace_steps: int | None = None
-    metric: Literal["success", "return"] = "success"
-    max_concurrent: int | None = None
-    seed: int = 0
-    workers: int = DEFAULTS.workers
-    envs_per_worker: int = DEFAULTS.envs_per_worker
-    eval_every: int = 1
-    eval_episodes: int = 10
-    checkpoint_every: int = 1
-    ppo: dict[str, Any] = field(default_factory=dict)
-    teacher_params: dict[str, Any] = field(default_factory=dict)
-
-    def base_config(self) -> TrainConfig:
-        """Every trial's config before its draws; by default a checkpoint each iteration, so a resumed trial
-        loses little (long trials may take one every few iterations: each is ~150 kB on disk)."""
-        config = TrainConfig(
-            teacher=self.teacher,
-            env=self.env,
-            total_steps=self.total_steps,
-            workers=self.workers,
-            envs_per_worker=self.envs_per_worker,
-            seed=self.seed,
-            checkpoint_every=self.checkpoint_every,
-            eval_every=self.eval_every,
-            eval_episodes=self.eval_episodes,
-        )
-        return ConfigFile(ppo=self.ppo, teacher_params=self.teacher_params).applied_to(config)
-
-    def space(self) -> SearchSpace:
-        return parse_search_space(self.search_space, self.teacher)
-
-
 _SETTING_FLAGS = (
     "env",
     "teacher",
@@ -188,7 +145,7 @@ def _settings(args: argparse.Namespace) -> TuneSettings:
 
 
 def _read_space(path: Path) -> dict[str, Any]:
-    from learner.tune_space import load_raw_search_space
+    from learner.experiments.tune_space import load_raw_search_space
 
     try:
         return load_raw_search_space(path)
@@ -231,7 +188,9 @@ def _tune(args: argparse.Namespace) -> int:
         session.connect_ray(args.ray_address, base.workers + 1, stack)
         teacher_url = teacher_ready()
         public_url = (args.public_url or os.environ.get(session.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
-        from learner.tune_report import write_reports  # imports Ray, so after connect_ray has chosen its auth mode
+        from learner.experiments.tune_report import (
+            write_reports,  # imports Ray, so after connect_ray has chosen its auth mode
+        )
 
         print(f"tune directory: {out}")
         print(f"dashboard:      {public_url}/  (every trial's curriculum)")
@@ -274,8 +233,8 @@ def train_trial(sampled: dict[str, Any], setup: TrialSetup) -> None:
     A trial started again (``--resume``) continues from its run's latest checkpoint."""
     from ray import tune
 
-    from learner.checkpoint import latest_checkpoint, load_checkpoint
-    from learner.trainer import IterationReport, Trainer
+    from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+    from learner.core.trainer import IterationReport, Trainer
 
     trial_id = tune.get_context().get_trial_id()
     config = apply_settings(setup.base, sampled)
@@ -308,7 +267,7 @@ class EvaluationLog:
     records that have none. Records before the first evaluation are not reported."""
 
     def __init__(self, run_dir: Path) -> None:
-        from learner.metrics import METRICS_FILE
+        from learner.core.metrics import METRICS_FILE
 
         self.path = Path(run_dir) / METRICS_FILE
         self.offset = self.path.stat().st_size if self.path.exists() else 0
@@ -345,7 +304,7 @@ def _fit(settings: TuneSettings, space: SearchSpace, setup: TrialSetup, out: Pat
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search import BasicVariantGenerator
 
-    from learner.tune_report import TuneProgress
+    from learner.experiments.tune_report import TuneProgress
 
     # The first bundle runs the trainable (the learner); the rollout actors it starts take the others.
     bundles: list[dict[str, int | float]] = [{"CPU": 1} for _ in range(1 + setup.base.workers)]

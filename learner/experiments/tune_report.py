@@ -14,17 +14,15 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ray.tune import Callback
 
 from learner.config_file import NOTES_KEY
+from learner.experiments.run_archive import metrics_records
+from learner.experiments.tune_settings import EXPERIMENT, METRICS, RUNS_DIR, TuneSettings
+from learner.experiments.tune_space import SearchSpace, grouped_settings, python_value
 from learner.json_file import write_json
-from learner.run_archive import metrics_records
-from learner.tune_space import SearchSpace, grouped_settings, python_value
-
-if TYPE_CHECKING:
-    from learner.tune import TuneSettings
 
 TRIALS_FILE = "trials.json"
 BEST_FILE = "best.json"
@@ -200,8 +198,6 @@ def _plot(path: Path, entries: list[dict[str, Any]], metric: str, best: str | No
 
 def write_reports(out: Path, settings: TuneSettings, space: SearchSpace, elapsed: float) -> TuneReport:
     from ray.tune import ExperimentAnalysis
-
-    from learner.tune import EXPERIMENT, METRICS, RUNS_DIR
 
     trials = ExperimentAnalysis(str(out / EXPERIMENT)).trials
     entries = sorted((_entry(trial, settings, out / RUNS_DIR, out) for trial in trials), key=lambda e: e["trial"])

@@ -27,8 +27,8 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from learner.config import PPOConfig, TrainConfig
 from learner.config_file import ConfigFile
+from learner.core.config import PPOConfig, TrainConfig
 
 Target = Literal["ppo", "teacher", "env"]
 Distribution = Literal["choice", "grid", "uniform", "loguniform", "randint"]

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from common.policy.trajectory import TrajectoryBatch
-from learner.ppo import compute_advantages
+from learner.core.ppo import compute_advantages
 
 
 def make_batch(rewards, values, terminated=None, truncated=None, final_values=None, last_values=None):

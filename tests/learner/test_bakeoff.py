@@ -20,8 +20,10 @@ from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
 from learner.arguments import UsageError
-from learner.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
-from learner.bakeoff_runs import (
+from learner.checkpoint_evaluation import EvaluationResult
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.experiments.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
+from learner.experiments.bakeoff_runs import (
     Run,
     archives_runs,
     check_settings,
@@ -30,10 +32,8 @@ from learner.bakeoff_runs import (
     teacher_params_by_kind,
     train_command,
 )
-from learner.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
-from learner.checkpoint import latest_checkpoint, load_checkpoint
-from learner.checkpoint_evaluation import EvaluationResult
-from learner.run_archive import archive_run, read_text, restore_run
+from learner.experiments.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
+from learner.experiments.run_archive import archive_run, read_text, restore_run
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128

@@ -1,7 +1,7 @@
 import pytest
 
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.config import TEACHERS, PPOConfig, TrainConfig
+from learner.core.config import TEACHERS, PPOConfig, TrainConfig
 from teacher_service.teachers import make_teacher
 
 
@@ -66,7 +66,7 @@ def test_every_setting_has_a_one_line_doc():
     import ast
     import inspect
 
-    from learner import config as module
+    from learner.core import config as module
 
     tree = ast.parse(inspect.getsource(module))
     for node in (n for n in tree.body if isinstance(n, ast.ClassDef) and n.name in ("PPOConfig", "TrainConfig")):

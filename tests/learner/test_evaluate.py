@@ -17,11 +17,11 @@ from common.kuka.scripted import scripted_action
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.actor_critic import InferencePolicy
 from kuka_curriculum import main
-from learner.checkpoint import load_checkpoint
 from learner.checkpoint_arguments import parse_task
 from learner.checkpoint_evaluation import EvaluationResult, describe_task, evaluate_policy, scripted_evaluation
+from learner.core.checkpoint import load_checkpoint
+from learner.core.kuka_policy import policy_snapshot
 from learner.episode_diagnostics import success_by_band
-from learner.kuka_policy import policy_snapshot
 from learner.stats import mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 

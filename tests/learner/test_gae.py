@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from common.policy.trajectory import TrajectoryBatch
-from learner.ppo import compute_advantages
+from learner.core.ppo import compute_advantages
 
 GAMMA, LAMBDA = 0.9, 0.8
 STEPS, ENVS = 6, 4

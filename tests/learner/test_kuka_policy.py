@@ -4,8 +4,8 @@ import pytest
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.env import BLOCK_Z, make_kuka_env
 from common.policy.inference import ObservationFeatures
-from learner.config import PPOConfig, TrainConfig
-from learner.kuka_policy import kuka_policy_spec
+from learner.core.config import PPOConfig, TrainConfig
+from learner.core.kuka_policy import kuka_policy_spec
 
 
 def test_the_world_block_offset_is_where_the_simulator_has_the_block_from_the_gripper():

@@ -4,8 +4,8 @@ import torch
 from reach_env import ReachTarget, RecordingTasks
 
 from common.policy.actor_critic import InferencePolicy, PolicySpec
-from learner.config import PPOConfig
-from learner.ppo import PPOLearner
+from learner.core.config import PPOConfig
+from learner.core.ppo import PPOLearner
 from rollout_worker.sampler import Sampler, run_episodes
 
 EVAL_SEEDS = range(1000, 1040)

@@ -14,8 +14,8 @@ import torch
 
 from common.policy.actor_critic import PolicySpec
 from common.policy.trajectory import TrajectoryBatch
-from learner.config import PPOConfig
-from learner.ppo import PPOLearner, ppo_losses
+from learner.core.config import PPOConfig
+from learner.core.ppo import PPOLearner, ppo_losses
 
 CLIP = 0.2
 

@@ -10,10 +10,10 @@ import pytest
 
 from common.kuka.task_space import KUKA_TASK_SPACE
 from kuka_curriculum import main
-from learner.checkpoint import Counters, save_checkpoint
-from learner.config import TrainConfig
-from learner.kuka_policy import kuka_policy_spec
-from learner.ppo import PPOLearner
+from learner.core.checkpoint import Counters, save_checkpoint
+from learner.core.config import TrainConfig
+from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.ppo import PPOLearner
 from teacher_service.process import free_port
 
 

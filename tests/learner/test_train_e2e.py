@@ -14,7 +14,7 @@ import httpx
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from common.client.schemas import API_PREFIX
-from learner.checkpoint import latest_checkpoint, load_checkpoint
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.session import curriculum_name
 from learner.teacher_process import local_teacher_service
 from teacher_service.process import free_port

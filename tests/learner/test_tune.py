@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 
 from kuka_curriculum import main
-from learner.checkpoint import latest_checkpoint, load_checkpoint
 from learner.config_file import read_config_file
-from learner.tune_space import SearchSpaceError, parse_search_space
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.experiments.tune_space import SearchSpaceError, parse_search_space
 
 TRIAL_FLAGS = ["--workers", "1", "--envs-per-worker", "2", "--ppo", "rollout_length=256", "--eval-episodes", "1"]
 TOTAL_STEPS = 1024
@@ -262,7 +262,7 @@ def test_a_refused_search_space_stops_the_command_before_anything_trains(tmp_pat
 
 
 def test_bakeoff_takes_the_settings_file_and_flags_override_it(tmp_path):
-    from learner import bakeoff
+    from learner.experiments import bakeoff
 
     settings = tmp_path / "best.json"
     settings.write_text(
@@ -298,7 +298,7 @@ def test_a_settings_file_with_an_unknown_key_is_refused_by_name(tmp_path, capsys
 def test_the_progress_line_shows_trial_states_the_best_and_the_steps_trained(capsys, monkeypatch):
     from types import SimpleNamespace
 
-    from learner import tune_report
+    from learner.experiments import tune_report
 
     clock = [100.0]
     monkeypatch.setattr(tune_report.time, "monotonic", lambda: clock[0])
@@ -319,8 +319,8 @@ def test_the_progress_line_shows_trial_states_the_best_and_the_steps_trained(cap
 def test_a_trial_that_trained_its_budget_is_finished_though_its_last_evaluation_came_earlier(tmp_path):
     from types import SimpleNamespace
 
-    from learner.tune import TuneSettings
-    from learner.tune_report import FINISHED, _entry
+    from learner.experiments.tune_report import FINISHED, _entry
+    from learner.experiments.tune_settings import TuneSettings
 
     run_dir = tmp_path / "runs" / "t0"
     run_dir.mkdir(parents=True)

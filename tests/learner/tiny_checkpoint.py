@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from common.kuka import ENV_ID
-from learner.checkpoint import Counters, save_checkpoint
-from learner.config import PPOConfig, TrainConfig
-from learner.kuka_policy import kuka_policy_spec
-from learner.ppo import PPOLearner
+from learner.core.checkpoint import Counters, save_checkpoint
+from learner.core.config import PPOConfig, TrainConfig
+from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.ppo import PPOLearner
 
 TINY_EPISODE_STEPS = 40
 

@@ -1,4 +1,4 @@
-"""``bench/curriculum_diagnostics.py`` reads each run's task space from its own teacher database: tiny
+"""``learner/experiments/curriculum_diagnostics.py`` reads each run's task space from its own teacher database: tiny
 runs of the book's space and of the hard family's, written the way the service and ``train`` write them."""
 
 from __future__ import annotations
@@ -11,15 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.curriculum_diagnostics import PLACEMENT_SKIPPED, load_run, main, summary_markdown
 from common.client.schemas import ParameterSpec
 from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
-from learner.bakeoff_runs import EVALUATION_FILE
-from learner.metrics import METRICS_FILE
-from learner.run_archive import archive_run
+from learner.core.metrics import METRICS_FILE
+from learner.experiments.bakeoff_runs import EVALUATION_FILE
+from learner.experiments.curriculum_diagnostics import PLACEMENT_SKIPPED, load_run, main, summary_markdown
+from learner.experiments.run_archive import archive_run
 from learner.teacher_process import DATABASE_FILE
-from teacher_service.curriculum_spec import RandomCurriculum
+from teacher_service.curriculum_spec import SPEC_CLASSES
 from teacher_service.store import NewResult, NewTask, Store, StoredCurriculum
 
 EPISODES = 1200
@@ -32,7 +32,7 @@ def write_run(directory: Path, space: TaskSpace) -> Path:
     """A finished run of a uniform teacher over ``space``: its teacher database, metrics log and final evaluation."""
     rng = np.random.default_rng(0)
     tasks = [space.from_array(space.from_unit(rng.random(len(space)))) for _ in range(EPISODES)]
-    spec = RandomCurriculum(teacher="random", space=[ParameterSpec.from_parameter(p) for p in space.parameters])
+    spec = SPEC_CLASSES["random"](teacher="random", space=[ParameterSpec.from_parameter(p) for p in space.parameters])
     directory.mkdir(parents=True)
     store = Store(directory / DATABASE_FILE)
 

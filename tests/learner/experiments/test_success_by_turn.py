@@ -1,5 +1,6 @@
-"""``bench/success_by_turn.py`` splits ``evaluate --json`` files by the block's turn (modulo a half turn) and
-x band: one column per file, the scripted controller's file named as such, files of other seeds refused."""
+"""``learner/experiments/success_by_turn.py`` splits ``evaluate --json`` files by the block's turn (modulo a
+half turn) and x band: one column per file, the scripted controller's file named as such,
+files of other seeds refused."""
 
 from __future__ import annotations
 
@@ -8,12 +9,12 @@ import math
 
 import pytest
 
-from bench.success_by_turn import main, turn_sense
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
 from learner.checkpoint_evaluation import EvaluationResult
+from learner.experiments.success_by_turn import main, turn_sense
 
 TASK = KUKA_HARD_V1_TASK_SPACE.hardest()
 
