@@ -29,15 +29,15 @@ import numpy as np
 from pydantic import Field
 
 from common.client.task_space import Task, TaskSpace
-from teacher_service.teachers.alp_gmm import (
+from teacher_service.teachers.base import EpisodeResult, FitJob
+from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
+from teacher_service.teachers.mixture import (
     MAX_FIT_RATE,
     MixtureFit,
     MixtureParams,
     MixtureSampler,
     MixtureTeacher,
 )
-from teacher_service.teachers.base import EpisodeResult, FitJob
-from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.row_log import RowLog
 
 REFIT_ROWS = 10_000

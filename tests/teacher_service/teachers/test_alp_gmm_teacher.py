@@ -12,7 +12,8 @@ from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, make_teacher
 from teacher_service.teachers import alp_gmm as alp_gmm_module
-from teacher_service.teachers.alp_gmm import TREE_GROWTH, AlpGmmTeacher, MixtureFit, fit_mixture
+from teacher_service.teachers.alp_gmm import TREE_GROWTH, AlpGmmTeacher
+from teacher_service.teachers.mixture import MixtureFit, fit_mixture
 
 SKEWED = TaskSpace(
     [

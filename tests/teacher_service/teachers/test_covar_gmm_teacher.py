@@ -11,8 +11,8 @@ import pytest
 
 from common.client.task_space import Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers.alp_gmm import MixtureFit
 from teacher_service.teachers.covar_gmm import CovarGmmTeacher
+from teacher_service.teachers.mixture import MixtureFit
 
 SQUARE = TaskSpace([Parameter("x", 0.0, 1.0), Parameter("y", -2.0, 2.0)])
 
