@@ -37,20 +37,18 @@ Where ours departs from the authors', and what it costs or gains:
   same on a unit box, so the toy cannot tell them apart; on KUKA's hard family the difference is
   not measured yet (raw units would move the narrow parameters hardly at all).
 - ``below_bar`` = ``jump`` (default, the authors'): a particle below the bar jumps to its success
-  sample. ``walk`` moves it at most ``max_move`` toward it, so every move is bounded: given to the
-  authors' code on the ALP-GMM paper's toy it cost 3 points from the easiest corner (76.7 to
-  73.7% mastered, 3 seeds; issue 48); the noisy resampling, not the jump, is what rescues a uniform
-  start. Ours from a uniform start: 75.2% walking against 76.8% jumping (5 seeds, 20,000 episodes).
-  Not measured on KUKA's hard family.
+  sample. ``walk`` moves it at most ``max_move`` toward it, so every move is bounded; on the ALP-GMM
+  paper's toy walking costs a little from the easiest corner, and the noisy resampling, not the
+  jump, is what rescues a uniform start (docs/results/parity.md).
 - ``max_move`` bounds the move; the authors' ``epsilon`` bounds its square (TeachMyAgent passes 5%
   of the diagonal, a radius of 27% of a unit square's diagonal); give the radius you want.
 - The movement's assignment is exact (``scipy.optimize.linear_sum_assignment``) where the authors
   use sliced Wasserstein; the estimate averages the 32 nearest buffered results at each point.
 - ``estimate`` = recent (not the default): the estimate is fitted to the last ``recent_results``
   results instead of the success buffer and the kept failures. The lasting buffer keeps successes
-  from before a student's success rate fell, and on KukaGraspHard-v1 (issue 44) it held the
-  estimate at 0.5 to 0.7 at the hardest point while the student succeeded there 10 to 17% of the
-  time. The buffer still supplies the replacement samples, but a particle below the bar takes only
+  from before a student's success rate fell, and on KukaGraspHard-v1 it held the estimate near the
+  bar at the hardest point while the student rarely succeeded there (docs/results/bakeoff-hard.md).
+  The buffer still supplies the replacement samples, but a particle below the bar takes only
   a sample estimated at or above it: when fewer samples are, the assignment gives them to the
   particles nearest them and the rest stay, to move to the best candidate of their full ball.
 - Until the particles' estimate first reaches the bar, failures are not kept (as the authors'), but
@@ -63,12 +61,9 @@ the return bar is ``success_delta`` of the way from the lowest to the highest re
 and no result meets it until two different returns were seen, so the defaults work on any reward
 scale. ``train`` passes 5.0 for KUKA (a grasp is worth about +10, a failure ends around -2..+2).
 
-On the ALP-GMM paper's toy (BENCHMARKS.md, issue 48: 20,000 episodes, 5 seeds, bar 0.5, 200
-particles, an update every 50, the same move radius, uniform start and target) this masters 76.8%
-of the cubes against the authors' code's 77.6% (0.99x; per seed 73 to 80% against 73 to 80%). Only
-the corner cube pays at first and a uniform cloud of 200 misses it on about one seed in eight: the
-version before this one then never moved (seed 4: 0%, 54.8% over the 5 seeds); the noisy
-resampling finds it (seed 4: 73%).
+On the ALP-GMM paper's toy this masters as much of the space as the authors' code, seed for seed
+within noise (docs/results/parity.md). There only the corner cube pays at first, and a uniform cloud
+can miss it: the noisy resampling above is what finds it.
 
 When it helps: a student that learns nothing from the hardest tasks but can be led there through
 tasks it already half masters, in spaces where the way to the target is not a straight line;

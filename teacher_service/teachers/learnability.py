@@ -89,8 +89,8 @@ class LearnabilityParams(TeacherParams):
     """Share of tasks drawn uniformly over the box instead of from the pool."""
     top_k: int | None = Field(default=20, ge=1, le=MAX_POOL)
     """Replay only the ``top_k`` highest-scoring candidates (SFL keeps its top K levels); null
-    means the whole pool. On the ALP-GMM paper's toy (2 seeds, in process), the top 20 of 200
-    mastered 75% (2-D) and 70% (6-D) of the cubes at 20k episodes, the whole pool 58% and 48%."""
+    means the whole pool. On the ALP-GMM paper's toy the top 20 of 200 master clearly more than the
+    whole pool (docs/results/parity.md)."""
     return_bar: FiniteFloat | None = Field(default=None, ge=-1e9, le=1e9)
     """The return above which a result without ``success`` counts as one; null means the midpoint
     of the lowest and highest return among the held results without ``success``."""

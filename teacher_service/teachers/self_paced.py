@@ -20,16 +20,11 @@ over ``target_box``. Every ``update_every`` results the Gaussian is re-chosen:
   ``below_bar="climb"`` it climbs performance whenever it is below the bar, away from the target.
 
 As in the authors' code (psclklnk/currot's ``SelfPacedTeacherV2``, checked on the ALP-GMM paper's
-toy for issue 48): tasks are drawn from the Gaussian truncated to the box (they reject draws
-outside it; here one inverse-CDF draw per parameter, the same distribution), and the expected
-performance is the plain importance-weighted mean (weights not normalised). Both were departures
-before issue 48 and made it slower early: clipped draws pile onto the box's faces (from the
-easiest corner, three quarters of the first tasks lay on an edge and a quarter on the corner
-itself) and are weighted where they landed. On the toy (from N(0, 0.05^2 I) toward N(0.5, I/12),
-bar 0.5, KL limit 0.25, 50 results per update, 3 seeds, in process) the clipped, self-normalised
-version mastered 11.7% at 5k episodes and 45.7% at 20k against the authors' 15.7% and 51%;
-truncation alone gave 15% and 52%, and with plain weights it is 16.3% and 52% (``climb``: 18.3%
-and 53.3%). BENCHMARKS.md has the runs.
+toy): tasks are drawn from the Gaussian truncated to the box (they reject draws outside it; here
+one inverse-CDF draw per parameter, the same distribution), and the expected performance is the
+plain importance-weighted mean (weights not normalised). Clipping draws instead piles them onto the
+box's faces, where they are weighted as if they had been drawn there, and learns more slowly early;
+the runs that showed it are on docs/results/parity.md.
 
 Differences that remain: the covariance is diagonal (2d numbers to optimise rather than
 d + d(d+1)/2; a full one needs more results per update than a curriculum service gets); the KL

@@ -10,7 +10,7 @@ import pytest
 
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE
-from learner.config import KUKA_TEACHER_PARAMS
+from learner.core.config import KUKA_TEACHER_PARAMS
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 
