@@ -14,14 +14,14 @@ import pytest
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers.currot import (
+from teacher_service.teachers.algorithms.currot import (
     REPLACED_TO_BEST,
     REPLACED_TOWARD_TARGET,
-    CurrotTeacher,
     FitInputs,
     TargetBox,
     move_particles,
 )
+from teacher_service.teachers.currot import CurrotTeacher
 
 LINE = TaskSpace([Parameter("x", 0.0, 1.0, hardest=1.0, easiest=0.0)])
 """One parameter on [0, 1], hardest at 1."""

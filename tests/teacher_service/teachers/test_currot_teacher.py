@@ -14,14 +14,14 @@ import pytest
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers.currot import (
+from teacher_service.teachers.algorithms.currot import (
     REPLACED_TO_BEST,
     REPLACED_TOWARD_TARGET,
     TOWARD_TARGET,
-    CurrotTeacher,
     ParticleFit,
     update_successes,
 )
+from teacher_service.teachers.currot import CurrotTeacher
 
 SQUARE = TaskSpace(
     [

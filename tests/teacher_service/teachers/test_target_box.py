@@ -17,7 +17,7 @@ from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
 from learner.arguments import setting
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
-from teacher_service.teachers.currot import TargetBox
+from teacher_service.teachers.algorithms.currot import TargetBox
 from teacher_service.teachers.params import box_in_space
 
 SPACE = TaskSpace(
