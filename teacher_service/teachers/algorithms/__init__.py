@@ -1,2 +1,3 @@
-"""The teachers' algorithms on their own: numpy in, numpy out, no counters, no saving (the teacher
-adapters in ``teachers`` keep those)."""
+"""The teachers' algorithms apart from their adapters: CURROT's particle update and ALP-GMM's
+learning-progress history. The adapters in ``teachers`` hold the parameters, count results, let
+fits fall due, install them and save and restore their state."""

@@ -11,8 +11,9 @@ import pytest
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers import alp_gmm as alp_gmm_module
-from teacher_service.teachers.alp_gmm import TREE_GROWTH, AlpGmmTeacher
+from teacher_service.teachers.algorithms import learning_progress
+from teacher_service.teachers.algorithms.learning_progress import TREE_GROWTH
+from teacher_service.teachers.alp_gmm import AlpGmmTeacher
 from teacher_service.teachers.mixture import MixtureFit, fit_mixture
 
 SKEWED = TaskSpace(
@@ -306,13 +307,13 @@ def test_tree_switches_happen_at_fixed_counts_whoever_builds_the_tree(monkeypatc
     params = {"fit_rate": 50, "max_components": 3, "buffer_size": 8, "target_task_ratio": 0.5}
     built: list[int] = []
 
-    build = alp_gmm_module._build_tree
+    build = learning_progress.build_tree
 
     def counting_build(rows: np.ndarray) -> Any:
         built.append(len(rows))
         return build(rows)
 
-    monkeypatch.setattr(alp_gmm_module, "_build_tree", counting_build)
+    monkeypatch.setattr(learning_progress, "build_tree", counting_build)
     in_background = alp_gmm(KUKA_TASK_SPACE, 5, **params)
     handed_out = repeated_hardest_task_run(in_background, 300, adopt=True)
     background_builds, built[:] = list(built), []
