@@ -14,10 +14,12 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
-from pydantic import Field, TypeAdapter, ValidationError, create_model
+from pydantic import Field, TypeAdapter, ValidationError, create_model, model_validator
+from typing_extensions import Self
 
 from common.client.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TEACHER_KINDS, Teacher, TeacherParams
+from teacher_service.teachers.base import parameter_type_problem
 
 log = logging.getLogger(__name__)
 
@@ -27,6 +29,14 @@ class TypedSpec(CurriculumSpecBase):
 
     teacher: str
     params: TeacherParams
+
+    @model_validator(mode="after")
+    def _kind_takes_the_space(self) -> Self:
+        teacher = TEACHER_KINDS[self.teacher]
+        problem = parameter_type_problem(self.teacher, teacher.parameter_types, self.task_space())
+        if problem is not None:
+            raise ValueError(problem)
+        return self
 
     def to_client_spec(self) -> CurriculumSpec:
         """The same curriculum as the client-side schema that responses carry."""

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from typing_extensions import Self
 
-from common.client.task_space import Parameter, Task, TaskSpace
+from common.client.task_space import Parameter, ParameterType, TaskSpace
 
 API_PREFIX = "/api/v1"
 
@@ -28,6 +28,9 @@ MAX_SEED = 2**63 - 1
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 
+TaskValues = dict[str, int | float]
+"""A task as the API carries it: an integer parameter's value stays an int (a float one is a float)."""
+
 
 class _Request(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -41,9 +44,14 @@ class ParameterSpec(_Request):
     high: FiniteFloat
     hardest: FiniteFloat | None = None
     easiest: FiniteFloat | None = None
+    type: ParameterType = Field(
+        default="float",
+        description="`float`: any value from low to high. `integer`: the whole numbers from low to high, both "
+        "included (a level seed, a layout choice); tasks then carry ints. Left out, a parameter is a float.",
+    )
 
     def to_parameter(self) -> Parameter:
-        return Parameter(self.name, self.low, self.high, hardest=self.hardest, easiest=self.easiest)
+        return Parameter(self.name, self.low, self.high, hardest=self.hardest, easiest=self.easiest, type=self.type)
 
     @classmethod
     def from_parameter(cls, parameter: Parameter) -> ParameterSpec:
@@ -53,6 +61,7 @@ class ParameterSpec(_Request):
             high=parameter.high,
             hardest=parameter.hardest,
             easiest=parameter.easiest,
+            type=parameter.type,
         )
 
 
@@ -117,7 +126,7 @@ class TaskRequest(_Request):
 
 class IssuedTask(BaseModel):
     task_id: str
-    params: Task
+    params: TaskValues
 
 
 class TaskBatch(BaseModel):
@@ -158,7 +167,7 @@ class FitEvent(BaseModel):
 
 class RecentResult(BaseModel):
     task_id: str
-    params: Task
+    params: TaskValues
     reward: float
     success: bool | None
     length: int | None
@@ -204,6 +213,9 @@ class TeacherParameterInfo(BaseModel):
 class TeacherKindInfo(BaseModel):
     kind: str = Field(description="The `teacher` of a curriculum request.")
     summary: str = Field(description="What the teacher does, in one line.")
+    parameter_types: list[ParameterType] = Field(
+        description="The task parameter types (`float`, `integer`) its task spaces may hold."
+    )
     parameters: list[TeacherParameterInfo] = Field(description="Its `params`, in declaration order.")
 
 

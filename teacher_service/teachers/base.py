@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from common.client.task_space import Task, TaskSpace
+from common.client.task_space import ParameterType, Task, TaskSpace
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.row_log import RowLog
 
@@ -73,6 +73,19 @@ class BuildJob:
     run: Callable[[], Any]
 
 
+def parameter_type_problem(kind: str, accepted: frozenset[ParameterType], space: TaskSpace) -> str | None:
+    """Why a kind cannot teach ``space``, naming the first parameter of a type it does not take; None
+    when it can."""
+    for parameter in space.parameters:
+        if parameter.type not in accepted:
+            takes = " and ".join(sorted(accepted))
+            return (
+                f"parameter {parameter.name!r} is an {parameter.type} parameter: "
+                f"the {kind} teacher takes {takes} parameters only"
+            )
+    return None
+
+
 class Teacher(ABC):
     """Hands out tasks in a task space and learns from episode results.
 
@@ -86,6 +99,8 @@ class Teacher(ABC):
     """
 
     kind: str
+    parameter_types: ClassVar[frozenset[ParameterType]] = frozenset({"float"})
+    """The task parameter types this kind can teach: a box's teachers model float parameters only."""
     Params: ClassVar[type[TeacherParams]]
     """The kind's parameter model: typed, bounded, documented (``params.TeacherParams``)."""
     params: TeacherParams
@@ -94,6 +109,9 @@ class Teacher(ABC):
         """``params`` may be the kind's model, a mapping of name to value, or ``None`` for the defaults."""
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        refused = parameter_type_problem(self.kind, self.parameter_types, space)
+        if refused is not None:
+            raise ValueError(refused)
         self.space = space
         self.seed = seed
         self.params = self.Params.parse(params)

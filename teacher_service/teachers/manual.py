@@ -170,6 +170,8 @@ class ManualTeacher(Teacher):
     units, or when not given the rewards' range learned from those seen (a success rate of 0.75)."""
 
     kind = "manual"
+    parameter_types = frozenset({"float", "integer"})
+    """Over integer parameters the lessons round to whole values."""
     Params = ManualParams
     params: ManualParams
 

@@ -20,7 +20,7 @@ from common.client.schemas import FiniteFloat
 from common.client.task_space import Task, TaskSpace
 
 TaskParam = Annotated[
-    dict[Annotated[str, Field(max_length=64)], FiniteFloat],
+    dict[Annotated[str, Field(max_length=64)], int | FiniteFloat],
     Field(max_length=64, description="A task: parameter name to value, inside the curriculum's space."),
 ]
 """A task-valued parameter; ``in_space`` checks it against the teacher's space."""

@@ -18,9 +18,11 @@ class RandomParams(TeacherParams):
 
 
 class RandomTeacher(Teacher):
-    """Every task uniform over the box: the baseline a curriculum has to beat."""
+    """Every task uniform over the space: the baseline a curriculum has to beat (over levels, each
+    level equally likely)."""
 
     kind = "random"
+    parameter_types = frozenset({"float", "integer"})
     Params = RandomParams
     params: RandomParams
 
@@ -29,7 +31,13 @@ class RandomTeacher(Teacher):
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         unit = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, len(self.space))
-        return [self.space.from_array(row) for row in self.space.from_unit(unit)]
+        values = self.space.from_unit(unit)
+        whole = self.space.integer
+        if whole.any():
+            # Each of an integer parameter's high - low + 1 values takes an equal share of [0, 1).
+            levels = self.space.high[whole] - self.space.low[whole] + 1
+            values[:, whole] = self.space.low[whole] + np.floor(unit[:, whole] * levels)
+        return [self.space.from_array(row) for row in values]
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         return None
@@ -53,6 +61,7 @@ class FixedTeacher(Teacher):
     """Always the same task: training without a curriculum."""
 
     kind = "fixed"
+    parameter_types = frozenset({"float", "integer"})
     Params = FixedParams
     params: FixedParams
 

@@ -62,6 +62,7 @@ def describe_kind(kind: str, teacher: type[Teacher]) -> TeacherKindInfo:
     return TeacherKindInfo(
         kind=kind,
         summary=" ".join(summary.split()),
+        parameter_types=sorted(teacher.parameter_types),
         parameters=[_parameter(name, schema) for name, schema in properties.items()],
     )
 
