@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from typing import Any, cast
+from typing import Any
 
 import gymnasium
 import ray
@@ -33,7 +33,6 @@ from ray.rllib.utils.metrics import (
 from ray.tune.registry import register_env
 
 from common.client.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
-from common.client.schemas import TeacherKind
 from common.client.teacher_client import TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
@@ -66,7 +65,7 @@ def make_env(config: dict[str, Any]) -> gymnasium.Env:
 
     kuka = gymnasium.make(ENV_ID, max_steps=config["max_episode_steps"])
     params = kuka_teacher_params(config["teacher"], dict(config["teacher_params"]))
-    register = CurriculumRegistration(cast(TeacherKind, config["teacher"]), KUKA_TASK_SPACE, params=params)
+    register = CurriculumRegistration(config["teacher"], KUKA_TASK_SPACE, params=params)
     return CurriculumWrapper(kuka, config["teacher_url"], config["curriculum"], register=register)
 
 

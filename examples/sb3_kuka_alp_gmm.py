@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
-from typing import cast
 
 import gymnasium
 from stable_baselines3 import PPO
@@ -28,7 +27,6 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.client.schemas import TeacherKind
 from common.client.teacher_client import TeacherClient
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
@@ -59,7 +57,7 @@ def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]
     def make() -> gymnasium.Env:
         kuka = gymnasium.make(ENV_ID, max_steps=args.max_episode_steps)
         params = kuka_teacher_params(args.teacher, dict(args.teacher_params))
-        register = CurriculumRegistration(cast(TeacherKind, args.teacher), KUKA_TASK_SPACE, params=params)
+        register = CurriculumRegistration(args.teacher, KUKA_TASK_SPACE, params=params)
         env = CurriculumWrapper(kuka, args.teacher_url, args.curriculum, register=register)
         return Monitor(env, str(args.log_dir / f"env-{rank}"), info_keywords=("task_id",))
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium
 from gymnasium.envs.classic_control.pendulum import PendulumEnv
@@ -28,7 +28,6 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
-from common.client.schemas import TeacherKind
 from common.client.task_space import Parameter, Task, TaskSpace
 from common.client.teacher_client import TeacherClient
 from learner.arguments import add_teacher_flags
@@ -77,7 +76,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def registration(args: argparse.Namespace) -> CurriculumRegistration:
     """The curriculum to create if it does not exist: the chosen kind over the pendulum's space."""
     params = {**PENDULUM_TEACHER_PARAMS.get(args.teacher, {}), **dict(args.teacher_params)}
-    return CurriculumRegistration(cast(TeacherKind, args.teacher), PENDULUM_TASK_SPACE, params=params)
+    return CurriculumRegistration(args.teacher, PENDULUM_TASK_SPACE, params=params)
 
 
 def make_env(args: argparse.Namespace, rank: int) -> Callable[[], gymnasium.Env]:

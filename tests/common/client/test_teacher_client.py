@@ -227,3 +227,14 @@ def test_errors_retrying_cannot_fix_are_raised(service):
             client.flush(timeout=30)
         assert client.pending == 1, "an undeliverable result is kept, not silently dropped"
         assert client.close(timeout=0.1) == 1
+
+
+def test_the_service_decides_which_teacher_kinds_exist(service):
+    """The client checks only that a kind is a well-formed name, so it needs no change when the
+    service gains a kind; the service refuses one it lacks with a 422 naming the kinds it has."""
+    with _client(service, "unknown-kind") as client:
+        with pytest.raises(TeacherRequestError) as unknown:
+            client.register("no-such-kind", KUKA_TASK_SPACE)
+        assert unknown.value.status == 422 and "alp-gmm" in str(unknown.value)
+        with pytest.raises(ValueError, match="teacher"):
+            client.register("Not A Kind!", KUKA_TASK_SPACE)
