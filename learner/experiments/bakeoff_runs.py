@@ -31,12 +31,11 @@ from learner.arguments import UsageError
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TrainConfig
-from learner.experiments.run_archive import TRAIN_LOG, metrics_records, restore_run
+from learner.experiments.run_archive import EVALUATION_FILE, TRAIN_LOG, metrics_records, restore_run
 from learner.json_file import write_json
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"
-EVALUATION_FILE = "evaluation.json"
 ARCHIVE_MARKER = "ARCHIVED_RUNS"
 POLL_S = 1.0
 
@@ -136,7 +135,8 @@ def archives_runs(out: Path) -> bool:
     if not (Path(out) / SETTINGS_FILE).exists():
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(
-            "Finished runs here are archived: raw files xz-compressed, only the evaluated checkpoint kept.\n",
+            "Finished runs here are archived: for git evaluation.json, metrics.jsonl.xz and the evaluated "
+            "checkpoint alone; the teacher database and logs xz-compressed, on disk only (git-ignored).\n",
             encoding="utf-8",
         )
     return marker.exists()

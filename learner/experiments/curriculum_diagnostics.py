@@ -44,8 +44,8 @@ from matplotlib.figure import Figure
 from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.core.config import TrainConfig
-from learner.experiments.bakeoff_runs import EVALUATION_FILE, RUNS_DIR
-from learner.experiments.run_archive import exists, metrics_records, unpacked
+from learner.experiments.bakeoff_runs import RUNS_DIR
+from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, unpacked
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.store import Store

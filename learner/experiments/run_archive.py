@@ -1,12 +1,19 @@
-"""A finished bake-off run packed for keeping: raw files xz-compressed, only its evaluated checkpoint left.
+"""A finished run packed for keeping: what the write-up reads, for git; what a resume needs, on disk only.
 
-A run directory straight out of ``kuka-curriculum train`` holds its teacher's SQLite database
-(about 12 MB after 6M steps), the metrics log (about 1 MB), the training log and a checkpoint
-every few iterations. The write-up reads the metrics (learning curves), the final evaluation and
-the final checkpoint, so once a run is trained and evaluated ``archive_run`` compresses the raw
-files and drops the earlier checkpoints; ``restore_run`` undoes the compression before a larger
-budget resumes the run. Readers go through ``read_text``, which takes either form, so directories
-written before archiving existed (the committed v1 bake-offs) read as they are.
+A run directory straight out of ``kuka-curriculum train`` holds its teacher's SQLite database, the
+metrics log, the training and teacher logs, TensorBoard events and a checkpoint every few iterations.
+The write-up reads three of them: the metrics (learning curves), the final evaluation and the final
+checkpoint (so a reader can evaluate it again). Once a bake-off run or a tune trial is trained (and
+evaluated), ``archive_run`` leaves the run in this form:
+
+- for git (``WRITE_UP_FILES``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` and
+  ``checkpoints/`` with the final checkpoint alone, the earlier ones deleted;
+- on disk only (``RESUME_FILES``, git-ignored): ``teacher.sqlite.xz``, ``train.log.xz`` and
+  ``teacher.log.xz``, which ``restore_run`` decompresses before a larger budget resumes the run, and
+  ``tensorboard/``.
+
+Readers go through ``read_text``, which takes either form, so directories written before archiving
+existed (the committed v1 bake-offs) read as they are. The measured sizes: docs/results/bakeoff-hard.md.
 
 Each step is safe to interrupt: a compressed file is written under a temporary name and renamed,
 and the raw file goes only after that, so a raw file present is always the authoritative copy.
@@ -30,10 +37,15 @@ from learner.core.metrics import METRICS_FILE
 
 SUFFIX = ".xz"
 TRAIN_LOG = "train.log"
+EVALUATION_FILE = "evaluation.json"
+"""A bake-off run's final evaluation (``bakeoff_runs``), kept as it is."""
+TENSORBOARD_DIR = "tensorboard"
+"""The run's TensorBoard events, which duplicate its metrics log: left on disk, never for git."""
 
 
 def _raw_files() -> tuple[str, ...]:
-    """What a run keeps compressed: xz packs a teacher database to about a quarter (11.7 MB to 2.8 MB).
+    """What a run keeps compressed: its teacher database, metrics and logs (xz packs a database to about
+    a quarter).
 
     Imported here, not at the top: the bake-off imports this module, and with the teacher service's
     client loaded up front a Ctrl-C during its final evaluation no longer stopped it (the
@@ -42,6 +54,20 @@ def _raw_files() -> tuple[str, ...]:
     from learner.teacher_process import DATABASE_FILE, LOG_FILE
 
     return DATABASE_FILE, METRICS_FILE, TRAIN_LOG, LOG_FILE
+
+
+def write_up_files() -> tuple[str, ...]:
+    """The paths, relative to the run directory, that an archived run keeps for the write-up and git:
+    the final evaluation, the compressed metrics and the checkpoints directory (holding the final one)."""
+    return EVALUATION_FILE, METRICS_FILE + SUFFIX, CHECKPOINT_DIR
+
+
+def resume_files() -> tuple[str, ...]:
+    """The paths, relative to the run directory, that an archived run keeps on disk only (git-ignored):
+    what ``restore_run`` needs to resume it (the compressed teacher database and logs) and TensorBoard's
+    events."""
+    database, _metrics, *logs = _raw_files()
+    return (database + SUFFIX, *(log + SUFFIX for log in logs), TENSORBOARD_DIR)
 
 
 def compressed(path: Path) -> Path:

@@ -11,7 +11,9 @@ failed and the others go on; ``--resume`` continues an interrupted tune, each un
 from its own last checkpoint.
 
 Everything lands in ``--out``: the search's settings (``tune.json``), Tune's experiment
-(``tune/``), each trial's run directory (``runs/<trial>``), and the results (``tune_report``).
+(``tune/``), each trial's run directory (``runs/<trial>``), and the results (``tune_report``). Once the
+results are written, each trial that will not train again is archived (``run_archive``): its metrics
+compressed, only its final checkpoint kept.
 """
 
 from __future__ import annotations
@@ -188,6 +190,7 @@ def _tune(args: argparse.Namespace) -> int:
         session.connect_ray(args.ray_address, base.workers + 1, stack)
         teacher_url = teacher_ready()
         public_url = (args.public_url or os.environ.get(session.PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
+        from learner.experiments.run_archive import archive_run  # imports torch, which the flags do not need
         from learner.experiments.tune_report import (
             write_reports,  # imports Ray, so after connect_ray has chosen its auth mode
         )
@@ -199,6 +202,9 @@ def _tune(args: argparse.Namespace) -> int:
         _fit(settings, space, setup, out, args.resume)
         elapsed = time.perf_counter() - started
         report = write_reports(out, settings, space, elapsed)  # while Ray is up: Tune reads trial errors through it
+    for run_dir in report.settled_runs:
+        if run_dir.is_dir():  # a trial that failed before its first iteration has none
+            archive_run(run_dir)
     print(report.summary)
     if report.unfinished:
         print(f"{report.unfinished} trial(s) unfinished; the same command with --resume continues them")

@@ -5,7 +5,8 @@ pending, finished, failed, and the best so far). At the end, in the tune directo
 ``trials.json`` (every trial's settings, status, final and best metrics, and its evaluation
 curve), ``curves.png`` (every trial's metric against steps) and ``best.json`` (the best finished
 trial's settings, in the settings-file form that ``train --config`` and ``bakeoff --config`` read).
-The curves come from each trial's own ``metrics.jsonl``, so they survive ``--resume``.
+The curves come from each trial's own metrics log (``metrics.jsonl``, or ``metrics.jsonl.xz`` once the
+trial is archived), so they survive ``--resume``.
 """
 
 from __future__ import annotations
@@ -88,6 +89,9 @@ class TuneReport:
     summary: str
     unfinished: int
     best: dict[str, Any] | None
+    settled_runs: tuple[Path, ...] = ()
+    """The run directories of the trials that will not train again (finished, stopped early or failed:
+    ``--resume`` continues only the unfinished), which the tune archives (``run_archive``)."""
 
 
 def evaluation_curve(run_dir: Path) -> list[dict[str, float]]:
@@ -114,7 +118,7 @@ def _error(trial: Any) -> str | None:
     return lines[-1] if lines else None
 
 
-def _entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dict[str, Any]:
+def trial_entry(trial: Any, settings: TuneSettings, runs_dir: Path, out: Path) -> dict[str, Any]:
     run_dir = runs_dir / trial.trial_id
     curve = evaluation_curve(run_dir)
     last = trial.last_result or {}
@@ -200,7 +204,7 @@ def write_reports(out: Path, settings: TuneSettings, space: SearchSpace, elapsed
     from ray.tune import ExperimentAnalysis
 
     trials = ExperimentAnalysis(str(out / EXPERIMENT)).trials
-    entries = sorted((_entry(trial, settings, out / RUNS_DIR, out) for trial in trials), key=lambda e: e["trial"])
+    entries = sorted((trial_entry(trial, settings, out / RUNS_DIR, out) for trial in trials), key=lambda e: e["trial"])
     finished = [entry for entry in entries if entry["status"] == FINISHED]
     # Ties (short tunes often end at 0% success for all) go to the other metric.
     other = next(name for name in METRICS if name != settings.metric)
@@ -236,4 +240,5 @@ def write_reports(out: Path, settings: TuneSettings, space: SearchSpace, elapsed
         lines.append(f"best: {best_entry['trial']} -> {out / BEST_FILE}")
     lines += [f"{out / TRIALS_FILE}", f"{out / CURVES_FILE}"]
     unfinished = sum(entry["status"] == UNFINISHED for entry in entries)
-    return TuneReport("\n".join(lines), unfinished, best)
+    settled = tuple(out / entry["run_dir"] for entry in entries if entry["status"] != UNFINISHED)
+    return TuneReport("\n".join(lines), unfinished, best, settled)

@@ -7,7 +7,9 @@ import json
 import lzma
 import shutil
 import sqlite3
+import subprocess
 import sys
+from pathlib import Path
 
 import imageio.v3 as iio
 import pytest
@@ -21,7 +23,7 @@ from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
 from learner.arguments import UsageError
 from learner.checkpoint_evaluation import EvaluationResult
-from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.core.checkpoint import CHECKPOINT_DIR, latest_checkpoint, load_checkpoint
 from learner.experiments.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
 from learner.experiments.bakeoff_runs import (
     Run,
@@ -33,7 +35,14 @@ from learner.experiments.bakeoff_runs import (
     train_command,
 )
 from learner.experiments.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
-from learner.experiments.run_archive import archive_run, read_text, restore_run
+from learner.experiments.run_archive import (
+    TENSORBOARD_DIR,
+    archive_run,
+    read_text,
+    restore_run,
+    resume_files,
+    write_up_files,
+)
 from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
@@ -62,6 +71,8 @@ TINY = [
     "update_epochs=2",
 ]
 
+ROOT = Path(__file__).resolve().parents[2]
+
 
 def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cluster, capsys):
     out = tmp_path / "bakeoff"
@@ -83,6 +94,9 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         "tensorboard",
         "train.log.xz",
     ]
+    # For git what the report reads; the rest only on disk, for resuming.
+    assert sorted(write_up_files()) == ["checkpoints", "evaluation.json", "metrics.jsonl.xz"]
+    assert sorted(resume_files()) == ["teacher.log.xz", "teacher.sqlite.xz", "tensorboard", "train.log.xz"]
     capsys.readouterr()
 
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
@@ -377,6 +391,7 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     archive_run(run.directory)
     names = sorted(path.name for path in run.directory.iterdir())
     assert names == ["checkpoints", "metrics.jsonl.xz", "teacher.sqlite.xz", "train.log.xz"]
+    assert set(names) - set(write_up_files()) <= set(resume_files()), "nothing else stays beside the write-up's"
     assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [final.name]
     assert run.steps_done() == 512, "the kept checkpoint still marks the run finished"
     assert learning_curve(run, "eval/success_rate") == raw_curve
@@ -391,6 +406,23 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     assert not list(run.directory.glob("*.xz"))
     with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
         assert database.execute("SELECT count(*) FROM results").fetchone() == (500,)
+
+
+@pytest.mark.skipif(not (ROOT / ".git").exists() or shutil.which("git") is None, reason="needs a git checkout")
+def test_git_ignores_what_an_archived_run_keeps_for_resuming_and_tracks_what_the_write_up_reads():
+    run = Path("benchmarks/some-bakeoff/runs/fixed-seed0")
+    # A directory's patterns match what lies in it: the events file stands for TensorBoard's directory.
+    ignored = [f"{name}/events.out" if name == TENSORBOARD_DIR else name for name in resume_files()]
+    ignored += ["teacher.sqlite", "metrics.jsonl", "train.log", "teacher.log"]
+    kept = [*(name for name in write_up_files() if name != CHECKPOINT_DIR), f"{CHECKPOINT_DIR}/step_0000000512.pt"]
+
+    def is_ignored(name: str) -> bool:
+        check = subprocess.run(["git", "check-ignore", "-q", "--no-index", str(run / name)], cwd=ROOT)
+        assert check.returncode in (0, 1), f"git check-ignore failed on {name}"
+        return check.returncode == 0
+
+    assert [name for name in ignored if not is_ignored(name)] == [], "on disk only, never for git"
+    assert [name for name in kept if is_ignored(name)] == [], "what the write-up reads stays in git"
 
 
 def test_a_bakeoff_directory_from_before_archiving_keeps_its_runs_raw(tmp_path):

@@ -21,6 +21,7 @@ import pytest
 from kuka_curriculum import main
 from learner.config_file import read_config_file
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.experiments.run_archive import metrics_records, resume_files, write_up_files
 from learner.experiments.tune_space import SearchSpaceError, parse_search_space
 
 TRIAL_FLAGS = ["--workers", "1", "--envs-per-worker", "2", "--ppo", "rollout_length=256", "--eval-episodes", "1"]
@@ -128,9 +129,20 @@ def test_the_resumed_tune_writes_every_trial_and_the_best(tuned):
 
 def test_resume_continues_the_interrupted_trial_from_its_checkpoint(tuned):
     """A trial restarted from nothing would log its first iteration twice."""
-    for metrics in tuned["out"].glob("runs/*/metrics.jsonl"):
-        steps = [json.loads(line)["step"] for line in metrics.read_text(encoding="utf-8").splitlines()]
-        assert steps.count(steps[0]) == 1, metrics
+    run_dirs = sorted(tuned["out"].glob("runs/*"))
+    assert len(run_dirs) == 3
+    for run_dir in run_dirs:
+        steps = [record["step"] for record in metrics_records(run_dir)]
+        assert steps and steps.count(steps[0]) == 1, run_dir
+
+
+def test_the_finished_tune_archives_its_trials_to_what_the_report_reads(tuned):
+    """Metrics compressed, the final checkpoint alone; the rest stays on disk, out of git."""
+    for run_dir in sorted(tuned["out"].glob("runs/*")):
+        names = {path.name for path in run_dir.iterdir()}
+        assert names & set(write_up_files()) == {"checkpoints", "metrics.jsonl.xz"}, run_dir
+        assert names - set(write_up_files()) <= set(resume_files()), run_dir
+        assert len(list((run_dir / "checkpoints").iterdir())) == 1, run_dir
 
 
 def test_every_trial_had_its_curriculum_on_the_one_service(tuned):
@@ -319,7 +331,7 @@ def test_the_progress_line_shows_trial_states_the_best_and_the_steps_trained(cap
 def test_a_trial_that_trained_its_budget_is_finished_though_its_last_evaluation_came_earlier(tmp_path):
     from types import SimpleNamespace
 
-    from learner.experiments.tune_report import FINISHED, _entry
+    from learner.experiments.tune_report import FINISHED, trial_entry
     from learner.experiments.tune_settings import TuneSettings
 
     run_dir = tmp_path / "runs" / "t0"
@@ -332,5 +344,5 @@ def test_a_trial_that_trained_its_budget_is_finished_though_its_last_evaluation_
     trial = SimpleNamespace(
         trial_id="t0", status="TERMINATED", last_result={"done": True, "steps": 8192.0}, config={}, error_file=None
     )
-    entry = _entry(trial, TuneSettings(search_space={}, total_steps=8000), tmp_path / "runs", tmp_path)
+    entry = trial_entry(trial, TuneSettings(search_space={}, total_steps=8000), tmp_path / "runs", tmp_path)
     assert entry["status"] == FINISHED and entry["final"]["steps"] == 4096

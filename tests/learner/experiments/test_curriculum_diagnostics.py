@@ -15,9 +15,8 @@ from common.client.schemas import ParameterSpec
 from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from learner.core.metrics import METRICS_FILE
-from learner.experiments.bakeoff_runs import EVALUATION_FILE
 from learner.experiments.curriculum_diagnostics import PLACEMENT_SKIPPED, load_run, main, summary_markdown
-from learner.experiments.run_archive import archive_run
+from learner.experiments.run_archive import EVALUATION_FILE, archive_run
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import SPEC_CLASSES
 from teacher_service.store import NewResult, NewTask, Store, StoredCurriculum
