@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     if found:
         print(f"Tracked files over {args.limit:,} bytes that {ALLOWLIST} does not list:", file=sys.stderr)
         print("\n".join(f"  {path} ({size:,} bytes)" for path, size in found.items()), file=sys.stderr)
-        print("Keep them out of git (compress or regenerate them; BENCHMARKS.md says how).", file=sys.stderr)
+        print("Keep them out of git (compress or regenerate them; a results page says how).", file=sys.stderr)
         return 1
     print(f"no tracked file over {args.limit:,} bytes outside {ALLOWLIST}")
     return 0

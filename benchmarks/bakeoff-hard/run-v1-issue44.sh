@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 44, item 4: the v1 bake-off again, after the teacher and student screening of 2026-11-27
-# (BENCHMARKS.md, "Issue 44: screening the teacher and the student"). Resumable: run it again and
+# (docs/results/bakeoff-hard.md). Resumable: run it again and
 # finished runs are skipped, a started one continues from its latest checkpoint; each finished run is
 # archived by `bakeoff` (compressed logs, one checkpoint), so its directory can be committed as it lands.
 #
@@ -8,7 +8,7 @@
 #
 # The same student for every teacher, STUDENT: world-offset (the default since 2026-11-27 17:15 UTC: the
 # networks also see the block's offset from the gripper in the world frame, `--ppo world_block_offset=true`,
-# 85% against 66% on the screening seed; BENCHMARKS "Issue 44: the student's levers") into
+# 85% against 66% on the screening seed; docs/results/bakeoff-hard.md) into
 # bakeoff-v1-issue44-world-offset, or default (PPO's defaults, the first runs, stopped after 2 of them) into
 # bakeoff-v1-issue44. CURROT as `train` registers it for KUKA (estimate=recent), from the
 # easiest point, heading for CURROT_TARGET (box: every parameter at its hardest but shaping free;

@@ -3,7 +3,7 @@
 # are skipped, a started one continues from its latest checkpoint. ENV_ID picks the family:
 # - KukaGraspHard-v1 (the default): writes into benchmarks/bakeoff-hard/bakeoff-v1/.
 # - KukaGraspHard-v0 (its design v4): writes into benchmarks/bakeoff-hard/bakeoff/. Stopped after no
-#   curriculum's 5 seeds: PPO alone learnt v0's hardest point on 3 of them (BENCHMARKS.md), so v0 cannot
+#   curriculum's 5 seeds: PPO alone learnt v0's hardest point on 3 of them (docs/results/bakeoff-hard.md), so v0 cannot
 #   show that teaching decides; running it again only goes on ranking the teachers on v0.
 # Outputs are committed as runs finish (run `$0 prune` first: it keeps each run's latest checkpoint
 # only), so a later session carries on from what an earlier one landed.
@@ -14,7 +14,7 @@
 #
 # Training seeds 0 to 4 and evaluation episode seeds 100000+, never used while screening (seeds
 # 100+, evaluation seeds 20000+: screen-teachers.sh). The teachers' parameters are the ones the
-# screening chose (BENCHMARKS.md, issue 29 part 2); every other setting is the bake-off's default.
+# screening chose (docs/results/bakeoff-hard.md); every other setting is the bake-off's default.
 # No curriculum's 5 seeds first (whether it stays under the issue's 20% decides whether the family can
 # show anything, and its runs are the cheapest, about 20 min), then seed 0 of every teacher, seeds 1
 # and 2 of every teacher, seeds 3 and 4 of ALP-GMM and the best two (BEST_TWO), and the report over all.

@@ -72,7 +72,8 @@ FAR_X_RANGE = (0.45, 0.70)
 FAR_Y_RANGE = (-0.12, 0.22)
 """Where the hard family's far blocks may lie: the tray within the gripper's reach. That is its target box,
 widened in x by half the block's length, which a grasp may hang over, and cut at y = -0.12: beyond it the
-arm nears the tray's wall and a controller that sees the block grasps it half as often (BENCHMARKS.md)."""
+arm nears the tray's wall and a controller that sees the block grasps it half as often
+(docs/results/bakeoff-hard.md)."""
 FAR_CENTRE = (0.532, 0.0)
 """The gripper's x and y at the book's default start pose."""
 FAR_MIN_DISTANCE = 0.16

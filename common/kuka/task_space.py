@@ -3,7 +3,7 @@
 ``KUKA_TASK_SPACE`` is the book's six-parameter space and ``KUKA_HARD_TASK_SPACE`` the harder family
 of ``KukaGraspHard-v0``: the same six plus four more. ``KUKA_HARD_V1_TASK_SPACE`` (``KukaGraspHard-v1``)
 is that family with a tighter hardest alignment margin, whose reward PPO without a curriculum did not find
-by chance on its screening seeds, as it did v0's (BENCHMARKS.md).
+by chance on its screening seeds, as it did v0's (docs/results/bakeoff-hard.md).
 """
 
 from __future__ import annotations
@@ -75,12 +75,12 @@ ALIGN_MARGIN_ANY = 90.0
 """An ``align_margin`` (degrees) that accepts the fingers at any angle to the block: the book's rule."""
 ALIGN_MARGIN_HARDEST = 8.0
 """The hard family's tightest ``align_margin`` (degrees): fingers that close within 8 degrees of square
-to the block. A controller that turns the wrist to the block always is (BENCHMARKS.md); a policy that
+to the block. A controller that turns the wrist to the block always is (docs/results/bakeoff-hard.md); a policy that
 leaves the wrist to chance is about one time in eleven."""
 
 ALIGN_MARGIN_HARDEST_V1 = 2.0
 """``KukaGraspHard-v1``'s tightest ``align_margin`` (degrees). The scripted controller still touches down
-within 0.1 degree of square, while a third as many chance lifts count as at v0's 8 (BENCHMARKS.md)."""
+within 0.1 degree of square, while a third as many chance lifts count as at v0's 8 (docs/results/bakeoff-hard.md)."""
 
 
 def align_margin_parameter(hardest: float) -> Parameter:
