@@ -17,50 +17,28 @@ def add_training_flags(group: argparse._ArgumentGroup, *, defaults_given: bool) 
     ``--checkpoint-every`` and ``--loop``. With ``defaults_given`` a flag left out takes its default (a
     bake-off's runs all train alike); without, it is None, so ``train --resume`` keeps a run's saved value."""
 
-    def default(value: object) -> object:
-        return value if defaults_given else None
-
+    whole_numbers = (
+        ("--workers", DEFAULTS.workers, "rollout actors"),
+        ("--envs-per-worker", DEFAULTS.envs_per_worker, "environments per actor"),
+        ("--rollout-length", DEFAULTS.ppo.rollout_length, "steps per environment per iteration"),
+        ("--max-episode-steps", DEFAULTS.max_episode_steps, "episode step limit"),
+        ("--checkpoint-every", DEFAULTS.checkpoint_every, "iterations between checkpoints"),
+    )
     group.add_argument(
         "--env",
         choices=ENV_IDS,
-        default=default(DEFAULTS.env),
+        default=DEFAULTS.env if defaults_given else None,
         help=f"task family: the environment and its task space, whose hardest task is evaluated "
         f"(default {DEFAULTS.env})",
     )
-    group.add_argument(
-        "--workers",
-        type=positive_int,
-        default=default(DEFAULTS.workers),
-        help=f"rollout actors (default {DEFAULTS.workers})",
-    )
-    group.add_argument(
-        "--envs-per-worker",
-        type=positive_int,
-        default=default(DEFAULTS.envs_per_worker),
-        help=f"environments per actor (default {DEFAULTS.envs_per_worker})",
-    )
-    group.add_argument(
-        "--rollout-length",
-        type=positive_int,
-        default=default(DEFAULTS.ppo.rollout_length),
-        help=f"steps per environment per iteration (default {DEFAULTS.ppo.rollout_length})",
-    )
-    group.add_argument(
-        "--max-episode-steps",
-        type=positive_int,
-        default=default(DEFAULTS.max_episode_steps),
-        help=f"episode step limit (default {DEFAULTS.max_episode_steps})",
-    )
-    group.add_argument(
-        "--checkpoint-every",
-        type=positive_int,
-        default=default(DEFAULTS.checkpoint_every),
-        help=f"iterations between checkpoints (default {DEFAULTS.checkpoint_every})",
-    )
+    for flag, default, what in whole_numbers:
+        group.add_argument(
+            flag, type=positive_int, default=default if defaults_given else None, help=f"{what} (default {default})"
+        )
     group.add_argument(
         "--loop",
         choices=LOOPS,
-        default=default(DEFAULTS.loop),
+        default=DEFAULTS.loop if defaults_given else None,
         help="async: workers sample while the learner updates, one update behind; sync: strictly on-policy, "
         f"evaluations pause training (default {DEFAULTS.loop})",
     )
