@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Issue 44, item 2: four levers of the student not yet screened on KukaGraspHard-v1, each one 6M-step trial on
 # screening seed 100 with the teacher the bake-off runs (CURROT, estimate=recent, from the easiest point,
-# the box target leaving shaping free), then 100 hardest-point episodes from seed 20000, as in BENCHMARKS
-# "Issue 44: screening the teacher and the student" (whose 66% is the comparison):
+# the box target leaving shaping free), then 100 hardest-point episodes from seed 20000, as in
+# docs/results/tune.md, issue 44's screening of the teacher and the student (whose 66% is the comparison):
 #   sdstd: a per-state action std (the action-noise lever);
 #   envs8: 8 environments per actor, a 8,192-step batch, ~10 finished episodes per update instead of ~5
 #          (envs8.json searches nothing: lr_final_fraction 0 is the default).
@@ -10,7 +10,7 @@
 #          policy observes; PPOConfig.world_block_offset).
 #   halfturn: worldoffset, and the block's yaw seen as (sin 2a, cos 2a) (PPOConfig.half_turn_block_yaw): a
 #          block turned half a turn is the same block, yet the bake-off's world-offset CURROT seed 0 turns the
-#          wrist one way only, up to 180 degrees (BENCHMARKS "Where the world-offset students miss").
+#          wrist one way only, up to 180 degrees (docs/results/bakeoff-hard.md#where-the-misses-are).
 # A fifth, the network at 128 x 128, was started and stopped at 100k steps once worldoffset had reached 85%:
 # the bake-off with that student came first.
 # Resumable: run it again and a finished lever is skipped, an unfinished tune resumes.
