@@ -54,7 +54,8 @@ from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TaskParam, TeacherParams, given_or_anchor
-from teacher_service.teachers.performance import ReturnScale, RewardRange, check_reward_range, scored
+from teacher_service.teachers.performance import RETURN_SCALE, ReturnScale, RewardRange, check_reward_range, scored
+from teacher_service.teachers.state import INT, OUTCOMES, PLAIN, FloatArray, Items, StateField
 
 RECENT_MOVES = 200
 """Boundary moves kept in the state (the oldest are dropped; the totals count them all). A move's
@@ -107,6 +108,14 @@ class AdrTeacher(Teacher):
     kind = "adr"
     Params = AdrParams
     params: AdrParams
+    state_fields = (
+        StateField("low", FloatArray("low")),
+        StateField("high", FloatArray("high")),
+        StateField("return_scale", RETURN_SCALE, "scale"),
+        StateField("moves", Items(PLAIN)),
+        StateField("widened", INT),
+        StateField("narrowed", INT),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: AdrParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -243,30 +252,12 @@ class AdrTeacher(Teacher):
 
     def _export(self) -> dict[str, Any]:
         return {
-            "low": self.low.tolist(),
-            "high": self.high.tolist(),
-            "queues": [
-                [self.space.names[d], side, [[reward, success] for reward, success in queue]]
-                for (d, side), queue in self.queues.items()
-            ],
-            "return_scale": self.scale.export(),
-            "moves": list(self.moves),
-            "widened": self.widened,
-            "narrowed": self.narrowed,
+            **super()._export(),
+            "queues": [[self.space.names[d], side, OUTCOMES.dump(queue)] for (d, side), queue in self.queues.items()],
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        low = np.array(state["low"], dtype=np.float64)
-        high = np.array(state["high"], dtype=np.float64)
-        if low.shape != (len(self.space),) or high.shape != low.shape:
-            raise ValueError(f"bounds must have {len(self.space)} values each, got {low.shape} and {high.shape}")
-        self.low, self.high = low, high
+        super()._import(state, history)
         index = {name: d for d, name in enumerate(self.space.names)}
         for name, side, queue in state["queues"]:
-            self.queues[index[name], side] = [
-                (float(reward), None if success is None else bool(success)) for reward, success in queue
-            ]
-        self.scale = ReturnScale(state["return_scale"])
-        self.moves.extend(state["moves"])
-        self.widened = int(state["widened"])
-        self.narrowed = int(state["narrowed"])
+            self.queues[index[name], side] = OUTCOMES.load(queue, [])

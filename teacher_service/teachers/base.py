@@ -37,6 +37,7 @@ import numpy as np
 from common.client.task_space import ParameterType, Task, TaskSpace
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.row_log import RowLog
+from teacher_service.teachers.state import StateField, export_fields, import_fields
 
 
 @dataclass(frozen=True)
@@ -90,8 +91,9 @@ class Teacher(ABC):
     """Hands out tasks in a task space and learns from episode results.
 
     Subclasses implement ``_draw`` (tasks for a run of sample indices), ``_learn_validated`` (one
-    result whose task ``learn`` has checked) and ``_describe`` (their part of ``state``); this class
-    keeps the counters and checks the input, so every kind counts and rejects bad input the same way.
+    result whose task ``learn`` has checked) and ``_describe`` (their part of ``state``), and declare
+    their ``state_fields`` for snapshots; this class keeps the counters and checks the input, so every
+    kind counts and rejects bad input the same way.
 
     Learning comes in two forms: ``learn`` records a result and hands back the fit it made due, for
     a service to run elsewhere and ``install`` later; ``learn_and_fit`` runs that fit on the spot
@@ -104,6 +106,9 @@ class Teacher(ABC):
     Params: ClassVar[type[TeacherParams]]
     """The kind's parameter model: typed, bounded, documented (``params.TeacherParams``)."""
     params: TeacherParams
+    state_fields: ClassVar[tuple[StateField, ...]] = ()
+    """The kind's state beyond the counters, as ``snapshot`` stores it (see ``state``); a kind
+    whose draws depend on the seed and the counters alone has none."""
 
     def __init__(self, space: TaskSpace, seed: int, params: TeacherParams | Mapping[str, Any] | None = None) -> None:
         """``params`` may be the kind's model, a mapping of name to value, or ``None`` for the defaults."""
@@ -257,10 +262,11 @@ class Teacher(ABC):
     def _describe(self) -> dict[str, Any]:
         """The kind's own JSON-ready state entries."""
 
-    @abstractmethod
     def _export(self) -> dict[str, Any]:
-        """The kind's own state beyond the counters, JSON-ready, for ``snapshot``."""
+        """The kind's own state beyond the counters, JSON-ready, for ``snapshot``: its
+        ``state_fields``; a kind with state no codec fits adds it here (``state``)."""
+        return export_fields(self, self.state_fields)
 
-    @abstractmethod
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         """Adopt what ``_export`` returned, and the history rows up to it."""
+        import_fields(self, self.state_fields, state)

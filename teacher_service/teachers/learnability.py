@@ -58,6 +58,7 @@ from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
 from teacher_service.teachers.performance import UNKNOWN_SUCCESS
 from teacher_service.teachers.row_log import RowLog
+from teacher_service.teachers.state import INT, OPTIONAL_FLOAT, FloatArray, StateField
 
 POOL_STREAM = 3
 """The random stream pool refreshes draw their candidates from (``draws`` has tasks and fits)."""
@@ -106,6 +107,12 @@ class LearnabilityTeacher(Teacher):
     kind = "learnability"
     Params = LearnabilityParams
     params: LearnabilityParams
+    state_fields = (
+        StateField("refreshes", INT),
+        StateField("pool", FloatArray("the pool", rows=True), "_pool"),
+        StateField("pool_success", FloatArray("the pool's success rates", rows=True), "_success"),
+        StateField("return_bar", OPTIONAL_FLOAT, "_bar"),
+    )
 
     def __init__(
         self, space: TaskSpace, seed: int, params: LearnabilityParams | Mapping[str, Any] | None = None
@@ -193,22 +200,15 @@ class LearnabilityTeacher(Teacher):
         return {
             "history_rows": self._log.size,
             "history_from": max(0, self._log.size - self.params.buffer_size),
-            "refreshes": self.refreshes,
-            "pool": self._pool.tolist(),
-            "pool_success": self._success.tolist(),
-            "return_bar": self._bar,
+            **super()._export(),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         self._log.load(history, int(state["history_from"]), int(state["history_rows"]))
         self._log.needed_from = max(0, self._log.size - self.params.buffer_size)
-        self.refreshes = int(state["refreshes"])
-        pool = np.array(state["pool"], dtype=np.float64).reshape(-1, self._dims)
-        success = np.array(state["pool_success"], dtype=np.float64)
-        if len(success) != len(pool):
-            raise ValueError(f"the pool has {len(pool)} candidates but {len(success)} success rates")
-        self._pool, self._success = pool, success
-        self._bar = None if state["return_bar"] is None else float(state["return_bar"])
+        super()._import(state, history)
+        if len(self._success) != len(self._pool):
+            raise ValueError(f"the pool has {len(self._pool)} candidates but {len(self._success)} success rates")
         self._refresh_choice()
 
     def _describe(self) -> dict[str, Any]:

@@ -30,7 +30,8 @@ from pydantic import Field, model_validator
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.params import FiniteFloat, TaskParam, TeacherParams, in_space
-from teacher_service.teachers.performance import ReturnScale
+from teacher_service.teachers.performance import RETURN_SCALE, ReturnScale
+from teacher_service.teachers.state import FLOAT, INT, STR, Items, Record, StateField
 
 LESSON_STEPS: dict[str, float] = {
     "rnd_obj_x": 0.05,
@@ -174,6 +175,16 @@ class ManualTeacher(Teacher):
     """Over integer parameters the lessons round to whole values."""
     Params = ManualParams
     params: ManualParams
+    state_fields = (
+        StateField("lesson", INT),
+        StateField("lesson_scores", Items(FLOAT)),
+        StateField("lesson_episodes", INT),
+        StateField("stale_results", INT),
+        StateField("unscored_results", INT),
+        StateField("moves", Items(Record({"at_results": INT, "from": INT, "to": INT, "why": STR}))),
+        StateField("moves_total", INT),
+        StateField("return_scale", RETURN_SCALE, "scale"),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: ManualParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -282,35 +293,7 @@ class ManualTeacher(Teacher):
             "advanced_at_results": [move["at_results"] for move in self.moves if move["to"] > move["from"]],
         }
 
-    def _export(self) -> dict[str, Any]:
-        return {
-            "lesson": self.lesson,
-            "lesson_scores": list(self.lesson_scores),
-            "lesson_episodes": self.lesson_episodes,
-            "stale_results": self.stale_results,
-            "unscored_results": self.unscored_results,
-            "moves": [dict(move) for move in self.moves],
-            "moves_total": self.moves_total,
-            "return_scale": self.scale.export(),
-        }
-
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        lesson = int(state["lesson"])
-        if not 0 <= lesson < len(self.lessons):
-            raise ValueError(f"lesson {lesson} is not in this plan of {len(self.lessons)} lessons")
-        self.lesson = lesson
-        self.lesson_scores.extend(float(score) for score in state["lesson_scores"])
-        self.lesson_episodes = int(state["lesson_episodes"])
-        self.stale_results = int(state["stale_results"])
-        self.unscored_results = int(state["unscored_results"])
-        self.moves.extend(
-            {
-                "at_results": int(move["at_results"]),
-                "from": int(move["from"]),
-                "to": int(move["to"]),
-                "why": str(move["why"]),
-            }
-            for move in state["moves"]
-        )
-        self.moves_total = int(state["moves_total"])
-        self.scale = ReturnScale(state["return_scale"])
+        super()._import(state, history)
+        if not 0 <= self.lesson < len(self.lessons):
+            raise ValueError(f"lesson {self.lesson} is not in this plan of {len(self.lessons)} lessons")

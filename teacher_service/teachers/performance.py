@@ -18,6 +18,7 @@ from typing import Annotated, Any
 from pydantic import Field
 
 from teacher_service.teachers.base import EpisodeResult
+from teacher_service.teachers.state import Codec
 
 REWARD_LIMIT = 1e9
 """Largest magnitude of a ``reward_range`` end: beyond any real return, and keeps the range finite."""
@@ -93,3 +94,16 @@ class ReturnScale:
         if given is not None:
             return {"source": "given", "range": list(given)}
         return {"source": "learned from the returns seen", "range": self.export()}
+
+
+class _ScaleCodec(Codec):
+    """A ``ReturnScale`` in a snapshot: the lowest and highest return seen, or ``None`` before any."""
+
+    def dump(self, value: Any) -> Any:
+        return value.export()
+
+    def load(self, data: Any, fresh: Any) -> Any:
+        return ReturnScale(data)
+
+
+RETURN_SCALE = _ScaleCodec()

@@ -79,7 +79,8 @@ from teacher_service.teachers.params import (
     check_target_box,
     given_or_anchor,
 )
-from teacher_service.teachers.performance import ReturnScale, RewardRange, check_reward_range, scored
+from teacher_service.teachers.performance import RETURN_SCALE, ReturnScale, RewardRange, check_reward_range, scored
+from teacher_service.teachers.state import BOOL, INT, OUTCOMES, PLAIN, FloatArray, Items, StateField
 
 MIN_SPREAD = 1e-3
 MAX_SPREAD = 1.0
@@ -341,6 +342,10 @@ def _pull_back(found: np.ndarray, acceptable: Callable[[np.ndarray], bool]) -> n
     return pulled
 
 
+GAUSSIAN_PART = FloatArray("the Gaussian's means and spreads")
+"""The Gaussian's mean or log standard deviation in a snapshot: one value per dimension."""
+
+
 class SelfPacedTeacher(Teacher):
     """One Gaussian over tasks, moved toward a target while the student keeps up. Scale: success when
     results carry it, else returns placed in ``reward_range``, learned from the returns seen when not
@@ -349,6 +354,14 @@ class SelfPacedTeacher(Teacher):
     kind = "self-paced"
     Params = SelfPacedParams
     params: SelfPacedParams
+    state_fields = (
+        StateField("points", Items(FloatArray("a point"))),
+        StateField("outcomes", OUTCOMES),
+        StateField("return_scale", RETURN_SCALE, "scale"),
+        StateField("updates", INT),
+        StateField("bar_reached", BOOL),
+        StateField("moves", Items(PLAIN)),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: SelfPacedParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -452,30 +465,11 @@ class SelfPacedTeacher(Teacher):
         }
 
     def _export(self) -> dict[str, Any]:
-        return {
-            "mean": self.gaussian.mean.tolist(),
-            "log_std": self.gaussian.log_std.tolist(),
-            "points": [point.tolist() for point in self.points],
-            "outcomes": [[reward, success] for reward, success in self.outcomes],
-            "return_scale": self.scale.export(),
-            "updates": self.updates,
-            "bar_reached": self.bar_reached,
-            "moves": list(self.moves),
-        }
+        return {"mean": self.gaussian.mean.tolist(), "log_std": self.gaussian.log_std.tolist(), **super()._export()}
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        mean = np.array(state["mean"], dtype=np.float64)
-        log_std = np.array(state["log_std"], dtype=np.float64)
-        if mean.shape != (len(self.space),) or log_std.shape != mean.shape:
-            raise ValueError(
-                f"the Gaussian needs {len(self.space)} means and spreads, got {mean.shape} and {log_std.shape}"
-            )
-        self.gaussian = Gaussian(mean, log_std)
-        self.points = [np.array(point, dtype=np.float64) for point in state["points"]]
-        self.outcomes = [
-            (float(reward), None if success is None else bool(success)) for reward, success in state["outcomes"]
-        ]
-        self.scale = ReturnScale(state["return_scale"])
-        self.updates = int(state["updates"])
-        self.bar_reached = bool(state["bar_reached"])
-        self.moves.extend(state["moves"])
+        self.gaussian = Gaussian(
+            GAUSSIAN_PART.load(state["mean"], self.gaussian.mean),
+            GAUSSIAN_PART.load(state["log_std"], self.gaussian.log_std),
+        )
+        super()._import(state, history)

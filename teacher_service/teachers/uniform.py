@@ -45,12 +45,6 @@ class RandomTeacher(Teacher):
     def _describe(self) -> dict[str, Any]:
         return {}
 
-    def _export(self) -> dict[str, Any]:
-        return {}
-
-    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        """Nothing beyond the counters: task ``i`` depends on the seed and ``i`` only."""
-
 
 class FixedParams(TeacherParams):
     point: TaskParam | None = None
@@ -77,9 +71,3 @@ class FixedTeacher(Teacher):
 
     def _describe(self) -> dict[str, Any]:
         return {"point": dict(self.point)}
-
-    def _export(self) -> dict[str, Any]:
-        return {}
-
-    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        """Nothing beyond the counters: the task never changes."""
