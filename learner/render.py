@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import sys
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -23,7 +22,7 @@ from common.client.task_space import Task
 from common.kuka import ENV_ID
 from common.kuka.env import KukaGraspEnv, make_kuka_env
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
-from learner.arguments import UsageError, positive_int
+from learner.arguments import UsageError, positive_int, run_command
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
 from learner.core.kuka_policy import policy_snapshot
 
@@ -150,13 +149,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        check_output(args.out)
-        checkpoint = read_checkpoint(args.checkpoint)
-        task = checkpoint_task(args.task, checkpoint)
-    except UsageError as error:
-        print(f"kuka-curriculum render: error: {error}", file=sys.stderr)
-        return 2
+    return run_command("render", _render, args, "stopped")
+
+
+def _render(args: argparse.Namespace) -> int:
+    check_output(args.out)
+    checkpoint = read_checkpoint(args.checkpoint)
+    task = checkpoint_task(args.task, checkpoint)
     frames = film_episodes(
         policy_snapshot(checkpoint),
         task,
