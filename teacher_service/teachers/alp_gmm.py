@@ -32,6 +32,7 @@ from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms, standa
 from teacher_service.teachers.mixture import MixtureFit, MixtureParams, MixtureSampler, MixtureTeacher
 from teacher_service.teachers.params import FiniteFloat
 from teacher_service.teachers.row_log import RowLog
+from teacher_service.teachers.state import COUNTS, STR, Items, StateField
 
 MAX_HISTORY_WINDOW = 1_000_000
 """At 9 columns for the KUKA space, about 150 MB a curriculum at most (the rows, and room to grow)."""
@@ -79,6 +80,11 @@ class AlpGmmTeacher(MixtureTeacher):
     Params = AlpGmmParams
     params: AlpGmmParams
     extra_coordinates = 1
+    state_fields = (
+        *MixtureTeacher.state_fields,
+        StateField("origins", COUNTS),
+        StateField("recent_origins", Items(STR), "_recent_origins"),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: AlpGmmParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -157,19 +163,11 @@ class AlpGmmTeacher(MixtureTeacher):
         return self._history.log
 
     def _export(self) -> dict[str, Any]:
-        return {
-            "history_rows": self._history.size,
-            "history_from": self._history.kept_from,
-            **self._export_fits(),
-            "origins": dict(self.origins),
-            "recent_origins": list(self._recent_origins),
-        }
+        return {"history_rows": self._history.size, "history_from": self._history.kept_from, **super()._export()}
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         self._history.restore(history, int(state.get("history_from", 0)), int(state["history_rows"]))
-        self._import_fits(state)
-        self.origins = Counter({str(origin): int(count) for origin, count in state["origins"].items()})
-        self._recent_origins.extend(str(origin) for origin in state["recent_origins"])
+        super()._import(state, history)
 
     @property
     def recent_alps(self) -> np.ndarray:

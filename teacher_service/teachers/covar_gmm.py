@@ -106,16 +106,11 @@ class CovarGmmTeacher(MixtureTeacher):
         return self._log
 
     def _export(self) -> dict[str, Any]:
-        return {
-            "history_rows": self._log.size,
-            "history_from": self._log.needed_from,
-            **self._export_fits(),
-        }
+        return {"history_rows": self._log.size, "history_from": self._log.needed_from, **super()._export()}
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        first = int(state.get("history_from", 0))
-        self._log.load(history, first, int(state["history_rows"]))
-        self._import_fits(state)
+        self._log.load(history, int(state.get("history_from", 0)), int(state["history_rows"]))
+        super()._import(state, history)
 
     def _to_features(self, tasks: np.ndarray) -> np.ndarray:
         return self.space.to_unit(tasks) if self.params.rescale_tasks else np.asarray(tasks, dtype=np.float64)

@@ -43,8 +43,9 @@ from teacher_service.teachers.algorithms.currot import (
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, TASK_STREAM, indexed_seed, indexed_uniforms
 from teacher_service.teachers.params import FiniteFloat, TaskBox, TeacherParams, box_in_space, check_target_box
-from teacher_service.teachers.performance import UNKNOWN_SUCCESS, ReturnScale
+from teacher_service.teachers.performance import RETURN_SCALE, UNKNOWN_SUCCESS, ReturnScale
 from teacher_service.teachers.row_log import RowLog
+from teacher_service.teachers.state import BOOL, FLOAT, INT, PLAIN, FloatArray, Items, Optional, StateField
 
 MAX_PARTICLES = 500
 MAX_BUFFER = 2000
@@ -136,6 +137,18 @@ class CurrotTeacher(Teacher):
     kind = "currot"
     Params = CurrotParams
     params: CurrotParams
+    state_fields = (
+        StateField("fits_requested", INT),
+        StateField("fits_installed", INT),
+        StateField("successes", FloatArray("the success buffer", rows=True), "_successes"),
+        StateField("failures", FloatArray("the kept failures", rows=True), "_failures"),
+        StateField("buffer_reached", BOOL, "_buffer_reached"),
+        StateField("threshold_reached", BOOL, "_threshold_reached"),
+        StateField("floor", Optional(Items(FLOAT)), "_floor"),
+        StateField("every_success", BOOL, "_every_success"),
+        StateField("returns_seen", RETURN_SCALE, "_returns"),
+        StateField("moves", Items(PLAIN), "_moves"),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: CurrotParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -352,19 +365,10 @@ class CurrotTeacher(Teacher):
         return {
             "history_rows": self._log.size,
             "history_from": self._log.needed_from,
-            "fits_requested": self.fits_requested,
-            "fits_installed": self.fits_installed,
             "model": None if self._fit is None else self.export_fit(self._fit),
             "pending": [[index, inputs.export()] for index, inputs in self._pending.items()],
-            "successes": self._successes.tolist(),
-            "failures": self._failures.tolist(),
             **({"window": self._window.tolist()} if self.params.estimate == "recent" else {}),
-            "buffer_reached": self._buffer_reached,
-            "threshold_reached": self._threshold_reached,
-            "floor": self._floor,
-            "every_success": self._every_success,
-            "returns_seen": self._returns.export(),
-            "moves": list(self._moves),
+            **super()._export(),
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
@@ -374,19 +378,10 @@ class CurrotTeacher(Teacher):
         self._log.load(rows, int(state["history_from"]), int(state["history_rows"]))
         if state["model"] is not None:
             self._adopt(self.import_fit(state["model"]))
-        self.fits_requested = int(state["fits_requested"])
-        self.fits_installed = int(state["fits_installed"])
+        super()._import(state, history)  # after the model, whose install moves the counters and flags
         self._pending = {int(index): FitInputs.load(inputs, dims) for index, inputs in state["pending"]}
-        self._successes = np.array(state["successes"], dtype=np.float64).reshape(-1, dims + 2)
-        self._failures = np.array(state["failures"], dtype=np.float64).reshape(-1, dims + 2)
         window = state["window"] if self.params.estimate == "recent" else []
         self._window = np.array(window, dtype=np.float64).reshape(-1, dims + 2)
-        self._buffer_reached = bool(state["buffer_reached"])
-        self._threshold_reached = bool(state["threshold_reached"])
-        self._floor = None if state["floor"] is None else [float(value) for value in state["floor"]]
-        self._every_success = bool(state["every_success"])
-        self._returns = ReturnScale(state["returns_seen"])
-        self._moves.extend(state["moves"])
 
     def _target_view(self) -> Task | dict[str, list[float]] | None:
         """The target in task units: none for ``uniform``, a task for ``hardest``, a range per

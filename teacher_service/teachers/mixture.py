@@ -8,7 +8,7 @@ import functools
 from abc import abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -18,6 +18,7 @@ from common.client.task_space import TaskSpace
 from teacher_service.teachers.base import FitJob, Teacher
 from teacher_service.teachers.draws import FIT_STREAM, indexed_seed, standard_normals
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.state import INT, StateField
 
 MAX_FIT_RATE = 2000
 MAX_COMPONENTS = 16
@@ -143,6 +144,10 @@ class MixtureTeacher(Teacher):
 
     params: MixtureParams
     extra_coordinates: int
+    state_fields: ClassVar[tuple[StateField, ...]] = (
+        StateField("fits_requested", INT),
+        StateField("fits_installed", INT),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: MixtureParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -194,17 +199,11 @@ class MixtureTeacher(Teacher):
     def import_fit(self, data: Mapping[str, Any]) -> MixtureFit:
         return MixtureFit.from_data(data, self._width)
 
-    def _export_fits(self) -> dict[str, Any]:
-        """The fit counters and the installed model, for a snapshot."""
-        return {
-            "fits_requested": self.fits_requested,
-            "fits_installed": self.fits_installed,
-            "model": None if self._sampler is None else self.export_fit(self._sampler.fit),
-        }
+    def _export(self) -> dict[str, Any]:
+        """The fit counters and the installed model (a kind adds its history around them)."""
+        return {**super()._export(), "model": None if self._sampler is None else self.export_fit(self._sampler.fit)}
 
-    def _import_fits(self, state: Mapping[str, Any]) -> None:
-        """Read back what ``_export_fits`` wrote."""
-        self.fits_requested = int(state["fits_requested"])
-        self.fits_installed = int(state["fits_installed"])
+    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
+        super()._import(state, history)
         model = state["model"]
         self._sampler = None if model is None else self._prepare(self.import_fit(model))

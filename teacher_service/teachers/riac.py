@@ -45,6 +45,7 @@ from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms, standard_normals
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.row_log import RowLog
+from teacher_service.teachers.state import INT, StateField
 
 SPLIT_STREAM = 2
 """The random stream that split searches draw their cuts from (``draws`` has tasks and fits)."""
@@ -144,6 +145,7 @@ class RiacTeacher(Teacher):
     kind = "riac"
     Params = RiacParams
     params: RiacParams
+    state_fields = (StateField("split_searches", INT), StateField("splits", INT), StateField("discards", INT))
 
     def __init__(self, space: TaskSpace, seed: int, params: RiacParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -275,18 +277,14 @@ class RiacTeacher(Teacher):
         return {
             "history_rows": self._log.size,
             "history_from": self._oldest_held(),
-            "split_searches": self.split_searches,
-            "splits": self.splits,
-            "discards": self.discards,
+            **super()._export(),
             "regions": [[region.cutoff, None if region.cut is None else list(region.cut)] for region in self._regions],
         }
 
     def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
         first = int(state.get("history_from", 0))
         self._log.load(history, first, int(state["history_rows"]))
-        self.split_searches = int(state["split_searches"])
-        self.splits = int(state["splits"])
-        self.discards = int(state["discards"])
+        super()._import(state, history)
         # Halves are numbered after the region they split, though not next to it: regions split in
         # the order the results made them, so walking the ids in order meets every parent first.
         entries = state["regions"]

@@ -15,7 +15,7 @@ and these fields are the whole state.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -114,6 +114,19 @@ class Items(Codec):
     def load(self, data: Any, fresh: Any) -> Any:
         loaded = [self.item.load(entry, None) for entry in data]
         return deque(loaded, maxlen=fresh.maxlen) if isinstance(fresh, deque) else loaded
+
+
+class Counts(Codec):
+    """A ``Counter`` of names, stored as a dict of name to count."""
+
+    def dump(self, value: Any) -> Any:
+        return dict(value)
+
+    def load(self, data: Any, fresh: Any) -> Any:
+        return Counter({str(name): int(count) for name, count in data.items()})
+
+
+COUNTS = Counts()
 
 
 @dataclass(frozen=True)
