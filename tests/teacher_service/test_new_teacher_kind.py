@@ -26,13 +26,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 from pydantic import Field
 
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams
+from teacher_service.teachers.state import OPTIONAL_FLOAT, StateField
 
 
 class ToyParams(TeacherParams):
@@ -46,6 +46,7 @@ class ToyTeacher(Teacher):
     kind = "toy"
     Params = ToyParams
     params: ToyParams
+    state_fields = (StateField("best", OPTIONAL_FLOAT),)
 
     def __init__(self, space: TaskSpace, seed: int, params: ToyParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
@@ -62,12 +63,6 @@ class ToyTeacher(Teacher):
 
     def _describe(self) -> dict[str, Any]:
         return {"best": self.best}
-
-    def _export(self) -> dict[str, Any]:
-        return {"best": self.best}
-
-    def _import(self, state: Mapping[str, Any], history: np.ndarray) -> None:
-        self.best = state["best"]
 '''
 
 
