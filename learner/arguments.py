@@ -6,9 +6,7 @@ import argparse
 import json
 import sys
 from collections.abc import Callable
-from typing import Any, get_args
-
-from common.client.schemas import TeacherKind
+from typing import Any
 
 
 class UsageError(Exception):
@@ -67,11 +65,11 @@ def add_override_flags(
 
 
 def add_teacher_flags(parser: argparse.ArgumentParser) -> None:
-    """``--teacher KIND`` (any kind the service offers; alp-gmm by default) and repeatable
+    """``--teacher KIND`` (any kind of the service's registry; alp-gmm by default) and repeatable
     ``--teacher-param NAME=VALUE`` (into ``teacher_params``), for the examples' own parsers."""
-    parser.add_argument(
-        "--teacher", default="alp-gmm", choices=get_args(TeacherKind), help="the curriculum's teacher kind"
-    )
+    from learner.core.config import TEACHERS  # here: the registry imports every teacher, which --help needs only
+
+    parser.add_argument("--teacher", default="alp-gmm", choices=TEACHERS, help="the curriculum's teacher kind")
     parser.add_argument(
         "--teacher-param",
         dest="teacher_params",

@@ -1,0 +1,25 @@
+"""The examples' teacher flags take every kind of the service's registry and refuse a kind it lacks."""
+
+import argparse
+
+import pytest
+
+from learner.arguments import add_teacher_flags
+from teacher_service.teachers import TEACHER_KINDS
+
+
+def example_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(exit_on_error=False)
+    add_teacher_flags(parser)
+    return parser
+
+
+@pytest.mark.parametrize("kind", sorted(TEACHER_KINDS))
+def test_every_registered_kind_is_a_teacher_choice(kind: str) -> None:
+    assert example_parser().parse_args(["--teacher", kind, "--teacher-param", "seed_like=3"]).teacher == kind
+
+
+def test_a_kind_the_registry_lacks_is_refused_and_the_default_is_alp_gmm() -> None:
+    assert example_parser().parse_args([]).teacher == "alp-gmm"
+    with pytest.raises(argparse.ArgumentError, match="invalid choice: 'nope'"):
+        example_parser().parse_args(["--teacher", "nope"])
