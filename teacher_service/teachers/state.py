@@ -2,11 +2,11 @@
 
 A kind lists what its snapshot holds beyond the counters as ``StateField``s: the key in the snapshot,
 the attribute it comes from, and a codec that turns the attribute's value into plain data and back
-(``Teacher._export`` and ``_import`` walk the list). Numbers, numpy arrays, lists and deques of them,
-tuples and records have codecs here (a return scale's is ``performance.RETURN_SCALE``); what no codec
-fits (a tree of regions, a history log) a kind adds in its own ``_export``/``_import`` around the
-declared fields. The codecs write what each kind wrote by hand before, key for key, so every stored
-snapshot still loads.
+(``Teacher._export`` and ``_import`` walk the list). Numbers, numpy arrays of any dtype (``ARRAY``,
+for one value per level, say), lists and deques of them, tuples and records have codecs here (a
+return scale's is ``performance.RETURN_SCALE``); what no codec fits (a tree of regions, a history
+log) a kind adds in its own ``_export``/``_import`` around the declared fields. The codecs write what
+each kind wrote by hand before, key for key, so every stored snapshot still loads.
 
 Nothing random is stored: draws are addressed by the seed and a counter (``draws``), so the counters
 and these fields are the whole state.
@@ -103,6 +103,27 @@ class FloatArray(Codec):
 
 
 @dataclass(frozen=True)
+class Array(Codec):
+    """A numpy array of any dtype (float scores, bool flags, int64 counters) as nested lists, read
+    back with the dtype and shape of the fresh teacher's array: a kind that keeps one value per level
+    declares ``StateField("scores", ARRAY)`` and a restored teacher holds the same array. A shape
+    other than the fresh one's (a snapshot of another space) is refused."""
+
+    def dump(self, value: Any) -> Any:
+        return np.asarray(value).tolist()
+
+    def load(self, data: Any, fresh: Any) -> Any:
+        expected = np.asarray(fresh)
+        array = np.array(data, dtype=expected.dtype)
+        if array.shape != expected.shape:
+            raise ValueError(f"an array of shape {expected.shape} was expected, got {array.shape}")
+        return array
+
+
+ARRAY = Array()
+
+
+@dataclass(frozen=True)
 class Items(Codec):
     """A list or a deque of values of ``item``; a deque keeps the fresh one's length limit."""
 
@@ -182,4 +203,8 @@ def import_fields(owner: object, fields: Sequence[StateField], state: Mapping[st
     """Set the declared fields of a fresh ``owner`` from what ``export_fields`` wrote."""
     for field in fields:
         fresh = getattr(owner, field.attribute)
-        setattr(owner, field.attribute, field.codec.load(state[field.key], fresh))
+        try:
+            loaded = field.codec.load(state[field.key], fresh)
+        except ValueError as error:
+            raise ValueError(f"state field {field.key!r}: {error}") from error
+        setattr(owner, field.attribute, loaded)

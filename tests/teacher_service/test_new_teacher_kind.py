@@ -26,13 +26,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 from pydantic import Field
 
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams
-from teacher_service.teachers.state import OPTIONAL_FLOAT, StateField
+from teacher_service.teachers.state import ARRAY, OPTIONAL_FLOAT, StateField
 
 
 class ToyParams(TeacherParams):
@@ -41,16 +42,26 @@ class ToyParams(TeacherParams):
 
 
 class ToyTeacher(Teacher):
-    """Tasks uniform in a centred share of the box; remembers the best return."""
+    """Tasks uniform in a centred share of the box; remembers the best return, and per quarter of
+    the first parameter (as a level teacher would per level) the results, the best and whether any
+    return reached 10."""
 
     kind = "toy"
     Params = ToyParams
     params: ToyParams
-    state_fields = (StateField("best", OPTIONAL_FLOAT),)
+    state_fields = (
+        StateField("best", OPTIONAL_FLOAT),
+        StateField("results", ARRAY),
+        StateField("bests", ARRAY),
+        StateField("reached", ARRAY),
+    )
 
     def __init__(self, space: TaskSpace, seed: int, params: ToyParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         self.best: float | None = None
+        self.results = np.zeros(4, dtype=np.int64)
+        self.bests = np.full(4, -np.inf)
+        self.reached = np.zeros(4, dtype=bool)
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, len(self.space))
@@ -59,10 +70,19 @@ class ToyTeacher(Teacher):
 
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:
         self.best = result.reward if self.best is None else max(self.best, result.reward)
+        quarter = min(int(4 * self.space.to_unit(self.space.to_array(result.task))[0]), 3)
+        self.results[quarter] += 1
+        self.bests[quarter] = max(self.bests[quarter], result.reward)
+        self.reached[quarter] |= result.reward >= 10.0
         return None
 
     def _describe(self) -> dict[str, Any]:
-        return {"best": self.best}
+        return {
+            "best": self.best,
+            "results": self.results.tolist(),
+            "bests": [None if np.isinf(b) else float(b) for b in self.bests],
+            "reached": self.reached.tolist(),
+        }
 '''
 
 
@@ -140,6 +160,8 @@ def test_the_new_kind_is_served_checked_taught_and_restored(toy_service: Service
         assert http.post("/curricula/toy/results", json={"results": results}).json()["accepted"] == 20
         before = http.get("/curricula/toy/state").json()["teacher"]
         assert before["best"] == 19.0 and before["results_seen"] == 20
+        assert sum(before["results"]) == 20 and before["results"][0] == before["results"][3] == 0
+        assert before["reached"][1] or before["reached"][2]
 
     toy_service.stop()
     toy_service.start()
