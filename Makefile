@@ -34,7 +34,7 @@ lock: $(STAMP)
 lock-check: $(STAMP)
 	$(PYTHON) .ci/lock.py check
 
-# No tracked file over 5 MB outside .large-files-allowlist.
+# No tracked file over 5 MB, and a bounded total outside models/ (.ci/large_files.py).
 large-files:
 	python3 .ci/large_files.py
 

@@ -1,10 +1,12 @@
-"""Refuse tracked files over 5 MB unless .large-files-allowlist names them, so the repository stays light.
+"""Keep the repository light: no tracked file over 5 MB, and tracked files outside ``models/`` within a
+total, so a clone carries code, docs and the write-ups' results rather than raw experiment output.
 
 Sizes are those of the blobs in git's index: what the next commit would hold, whatever the working tree
-has since. The allowlist holds one path per line (``#`` starts a comment); it lists the big files that
-were already committed when this check began, so that nothing had to be deleted for it.
+has since. ``models/`` holds the shipped policies, which the total leaves out (each still counts against
+the per-file limit). A run's raw files (teacher databases, logs, raw metrics) are git-ignored; the
+results pages say which command regenerates them.
 
-    python .ci/large_files.py [--root DIR] [--limit BYTES]
+    python .ci/large_files.py [--root DIR] [--limit BYTES] [--total-limit BYTES]
 """
 
 from __future__ import annotations
@@ -15,7 +17,10 @@ import sys
 from pathlib import Path
 
 LIMIT_BYTES = 5_000_000
-ALLOWLIST = ".large-files-allowlist"
+TOTAL_LIMIT_BYTES = 55_000_000
+"""Issue 57 brings the tree outside models/ to 30 MB in two steps (a session's diffs are capped): this
+is the first step's ceiling, lowered as the rest leaves."""
+EXCLUDED_FROM_TOTAL = "models/"
 
 
 def tracked_sizes(root: Path) -> dict[str, int]:
@@ -40,31 +45,48 @@ def tracked_sizes(root: Path) -> dict[str, int]:
     return sizes
 
 
-def allowed(root: Path) -> set[str]:
-    path = root / ALLOWLIST
-    if not path.is_file():
-        return set()
-    return {entry for line in path.read_text().splitlines() if (entry := line.split("#")[0].strip())}
+def oversized(sizes: dict[str, int], limit: int = LIMIT_BYTES) -> dict[str, int]:
+    """The tracked files over ``limit`` bytes."""
+    return {path: size for path, size in sorted(sizes.items()) if size > limit}
 
 
-def oversized(root: Path, limit: int = LIMIT_BYTES) -> dict[str, int]:
-    """The tracked files over ``limit`` bytes that the allowlist does not name."""
-    permitted = allowed(root)
-    return {path: size for path, size in sorted(tracked_sizes(root).items()) if size > limit and path not in permitted}
+def total_outside_models(sizes: dict[str, int]) -> int:
+    return sum(size for path, size in sizes.items() if not path.startswith(EXCLUDED_FROM_TOTAL))
+
+
+def largest(sizes: dict[str, int], count: int = 5) -> list[tuple[str, int]]:
+    return sorted(sizes.items(), key=lambda item: item[1], reverse=True)[:count]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--root", type=Path, default=Path(__file__).resolve().parents[1])
-    parser.add_argument("--limit", type=int, default=LIMIT_BYTES, help="bytes (default: %(default)s)")
+    parser.add_argument("--limit", type=int, default=LIMIT_BYTES, help="bytes per file (default: %(default)s)")
+    parser.add_argument(
+        "--total-limit", type=int, default=TOTAL_LIMIT_BYTES,
+        help=f"bytes in all outside {EXCLUDED_FROM_TOTAL} (default: %(default)s)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
-    found = oversized(args.root, args.limit)
-    if found:
-        print(f"Tracked files over {args.limit:,} bytes that {ALLOWLIST} does not list:", file=sys.stderr)
+    sizes = tracked_sizes(args.root)
+    failed = False
+    if found := oversized(sizes, args.limit):
+        print(f"Tracked files over {args.limit:,} bytes:", file=sys.stderr)
         print("\n".join(f"  {path} ({size:,} bytes)" for path, size in found.items()), file=sys.stderr)
+        failed = True
+    total = total_outside_models(sizes)
+    if total > args.total_limit:
+        outside = {path: size for path, size in sizes.items() if not path.startswith(EXCLUDED_FROM_TOTAL)}
+        print(
+            f"Tracked files outside {EXCLUDED_FROM_TOTAL} total {total:,} bytes, over {args.total_limit:,}; "
+            "the largest:",
+            file=sys.stderr,
+        )
+        print("\n".join(f"  {path} ({size:,} bytes)" for path, size in largest(outside)), file=sys.stderr)
+        failed = True
+    if failed:
         print("Keep them out of git (compress or regenerate them; a results page says how).", file=sys.stderr)
         return 1
-    print(f"no tracked file over {args.limit:,} bytes outside {ALLOWLIST}")
+    print(f"no tracked file over {args.limit:,} bytes; {total:,} bytes outside {EXCLUDED_FROM_TOTAL}")
     return 0
 
 

@@ -1,6 +1,6 @@
-"""The repository's own gates (``make check``): the lock files agree with pyproject.toml, and no tracked
-file over 5 MB gets in unless the allowlist names it. Each runs as ``make`` runs it, on this checkout and
-on a copy with a planted fault that it must refuse."""
+"""The repository's own gates (``make check``): the lock files agree with pyproject.toml, no tracked
+file is over 5 MB, and the tracked files outside models/ keep within a total. Each runs as ``make``
+runs it, on this checkout and on a copy with a planted fault that it must refuse."""
 
 from __future__ import annotations
 
@@ -103,12 +103,12 @@ def git(repository: Path, *arguments: str) -> None:
     subprocess.run(["git", "-C", str(repository), *arguments], check=True, capture_output=True)
 
 
-def test_no_tracked_file_of_this_checkout_is_large_outside_the_allowlist() -> None:
+def test_this_checkout_keeps_within_the_size_limits() -> None:
     result = run(LARGE_FILES)
     assert result.returncode == 0, result.stderr
 
 
-def test_a_large_file_is_refused_until_the_allowlist_names_it(tmp_path: Path) -> None:
+def test_a_file_over_the_limit_is_refused(tmp_path: Path) -> None:
     git(tmp_path, "init", "--quiet")
     (tmp_path / "small.bin").write_bytes(b"\0" * 4_000_000)
     (tmp_path / "big dir").mkdir()
@@ -119,9 +119,24 @@ def test_a_large_file_is_refused_until_the_allowlist_names_it(tmp_path: Path) ->
     assert refused.returncode == 1
     assert "big dir/teacher.sqlite (5,000,001 bytes)" in refused.stderr and "small.bin" not in refused.stderr
 
-    (tmp_path / ".large-files-allowlist").write_text("# kept for the write-up\nbig dir/teacher.sqlite\n")
-    allowed = run(LARGE_FILES, "--root", tmp_path)
-    assert allowed.returncode == 0, allowed.stderr
+    git(tmp_path, "rm", "--quiet", "--cached", "big dir/teacher.sqlite")
+    assert run(LARGE_FILES, "--root", tmp_path).returncode == 0
+
+
+def test_the_total_outside_models_is_bounded_and_models_do_not_count(tmp_path: Path) -> None:
+    git(tmp_path, "init", "--quiet")
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "policy.pt").write_bytes(b"\0" * 3_000_000)
+    (tmp_path / "results.json").write_bytes(b"\0" * 1_000_000)
+    git(tmp_path, "add", ".")
+    within = run(LARGE_FILES, "--root", tmp_path, "--total-limit", "1500000")
+    assert within.returncode == 0 and "1,000,000 bytes outside models/" in within.stdout, within.stderr
+
+    (tmp_path / "curves.png").write_bytes(b"\0" * 600_000)
+    git(tmp_path, "add", ".")
+    over = run(LARGE_FILES, "--root", tmp_path, "--total-limit", "1500000")
+    assert over.returncode == 1
+    assert "total 1,600,000 bytes, over 1,500,000" in over.stderr and "results.json (1,000,000 bytes)" in over.stderr
 
 
 def test_a_large_file_only_in_the_working_tree_is_not_counted(tmp_path: Path) -> None:
