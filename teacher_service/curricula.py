@@ -137,7 +137,8 @@ class Curriculum:
         """Draw tasks and answer once they are on disk."""
         first = self.teacher.tasks_drawn
         results_seen = self.teacher.results_seen
-        tasks = [self.space.validate(task) for task in self.teacher.sample(count)]
+        drawn, score_only = self.teacher.sample_marked(count)
+        tasks = [self.space.validate(task) for task in drawn]
         issued_at = time.time()
         records = [NewTask(first + i, task, results_seen, issued_at) for i, task in enumerate(tasks)]
 
@@ -150,7 +151,10 @@ class Curriculum:
             self._expire(issued_at)
 
         await self._store.add_tasks(self.id, records, on_commit=stored)
-        return [IssuedTask(task_id=self.task_id(first + i), params=task) for i, task in enumerate(tasks)]
+        return [
+            IssuedTask(task_id=self.task_id(first + i), params=task, score_only=only)
+            for i, (task, only) in enumerate(zip(tasks, score_only, strict=True))
+        ]
 
     async def report(self, items: list[ResultItem]) -> ResultAck:
         """Store new results, then learn from them; all or nothing.
@@ -196,14 +200,17 @@ class Curriculum:
         tasks = {index: self.outstanding[index] for index in claimed}
         self._writing.update(claimed)
         records = [
-            NewResult(index, item.reward, item.success, item.length, received_at) for index, item in claimed.items()
+            NewResult(index, item.reward, item.success, item.length, received_at, item.score)
+            for index, item in claimed.items()
         ]
 
         def stored() -> None:
             self._writing.difference_update(claimed)
             for index, item in claimed.items():
                 self.outstanding.pop(index, None)
-                job = self._apply_result(index, tasks[index], item.reward, item.success, item.length)
+                job = self._apply_result(
+                    index, EpisodeResult(tasks[index], item.reward, item.success, item.length, item.score)
+                )
                 self.recent_results.append(
                     RecentResult(
                         task_id=self.task_id(index),
@@ -212,6 +219,7 @@ class Curriculum:
                         success=item.success,
                         length=item.length,
                         received_at=received_at,
+                        score=item.score,
                     )
                 )
                 if job is not None:
@@ -239,11 +247,9 @@ class Curriculum:
             self.tasks_expired += expired
             self._metrics.tasks_expired.inc(expired)
 
-    def _apply_result(
-        self, index: int, task: Task, reward: float, success: bool | None, length: int | None
-    ) -> FitJob | None:
+    def _apply_result(self, index: int, result: EpisodeResult) -> FitJob | None:
         """Teach the teacher one committed result and count it; returns the fit it made due."""
-        job = self.teacher.learn(EpisodeResult(task, reward, success, length))
+        job = self.teacher.learn(result)
         self.results_received += 1
         self._last_result_index = index
         return job
@@ -377,6 +383,7 @@ class Curriculum:
                     success=result.success,
                     length=result.length,
                     received_at=result.received_at,
+                    score=result.score,
                 )
             )
         if replayed.results_replayed or replayed.rerun_fits:

@@ -125,7 +125,7 @@ def replay(
     for result in tqdm(results, total=total, desc=f"replaying {name}", unit="result", disable=None, leave=False):
         install_recorded(teacher.results_seen)
         draw_to(drawn_before(teacher.results_seen))
-        job = teacher.learn(EpisodeResult(result.task, result.reward, result.success, result.length))
+        job = teacher.learn(EpisodeResult(result.task, result.reward, result.success, result.length, result.score))
         last_result_index = result.task_index
         answered.add(result.task_index)
         if job is not None:

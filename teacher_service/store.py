@@ -11,12 +11,13 @@ a busy event loop, and the waits swamp the commits.) Writes complete, and their 
 callbacks run, in the order they were submitted: the teachers see results in exactly the order
 they are stored, which is the order a replay feeds them back.
 
-What a restart reads (schema version 2): per curriculum, its newest snapshot (one row: the
+What a restart reads (schema version 3): per curriculum, its newest snapshot (one row: the
 teacher's exported state, the service's counters and awaited task indices, and the sequence
 number of the last result it had learned), the teacher's append-only history as chunks of float64
 rows written with the snapshots, and only the tasks, results and fits stored after the snapshot.
 Fit rows carry the fitted model, so no installed fit is ever computed twice. A version-1 database
 gains the new tables and columns in place; its first start replays its whole history once.
+Version 3 adds each result's optional ``score`` (the level kinds'); older rows read as having none.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from common.client.task_space import Task
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 _SCHEMA_V1 = """
 CREATE TABLE curricula (
     id INTEGER PRIMARY KEY,
@@ -98,7 +99,10 @@ CREATE TABLE history_chunks (
     PRIMARY KEY (curriculum_id, first_row)
 );
 """
-_MIGRATIONS = {0: _SCHEMA_V1, 1: _MIGRATE_V1_TO_V2}
+_MIGRATE_V2_TO_V3 = """
+ALTER TABLE results ADD COLUMN score REAL;
+"""
+_MIGRATIONS = {0: _SCHEMA_V1, 1: _MIGRATE_V1_TO_V2, 2: _MIGRATE_V2_TO_V3}
 """The script that takes a database from each version to the next."""
 
 HISTORY_CHUNK_ROWS = 65_536
@@ -107,7 +111,8 @@ HISTORY_CHUNK_ROWS = 65_536
 _INSERT_CURRICULUM = "INSERT INTO curricula (id, name, spec, created_at) VALUES (?, ?, ?, ?)"
 _INSERT_TASK = "INSERT INTO tasks (curriculum_id, task_index, params, results_seen, issued_at) VALUES (?, ?, ?, ?, ?)"
 _INSERT_RESULT = (
-    "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at) VALUES (?, ?, ?, ?, ?, ?)"
+    "INSERT INTO results (curriculum_id, task_index, reward, success, length, received_at, score)"
+    " VALUES (?, ?, ?, ?, ?, ?, ?)"
 )
 _INSERT_FIT = (  # REPLACE: a restart records again a fit it ran because the live row was missing or had no model
     "INSERT OR REPLACE INTO fits"
@@ -161,6 +166,7 @@ class StoredResult:
     success: bool | None
     length: int | None
     received_at: float
+    score: float | None = None
 
 
 @dataclass(frozen=True)
@@ -183,6 +189,7 @@ class NewResult:
     success: bool | None
     length: int | None
     received_at: float
+    score: float | None = None
 
 
 @dataclass(frozen=True)
@@ -273,7 +280,7 @@ def _snapshot_statements(curriculum_id: int, snapshot: TeacherSnapshot) -> _Stat
 
 
 _SELECT_RESULTS = (
-    "SELECT r.seq, r.task_index, t.params, r.reward, r.success, r.length, r.received_at"
+    "SELECT r.seq, r.task_index, t.params, r.reward, r.success, r.length, r.received_at, r.score"
     " FROM results r JOIN tasks t USING (curriculum_id, task_index)"
 )
 _FIT_COLUMNS = "fit_index, tasks_sampled, results_seen, started_at, finished_at, error"
@@ -293,9 +300,9 @@ def _fit_row(curriculum_id: int, fit: StoredFit) -> tuple[Any, ...]:
 
 
 def _result(row: tuple[Any, ...]) -> StoredResult:
-    seq, index, params, reward, success, length, received_at = row
+    seq, index, params, reward, success, length, received_at, score = row
     return StoredResult(
-        seq, index, json.loads(params), reward, None if success is None else bool(success), length, received_at
+        seq, index, json.loads(params), reward, None if success is None else bool(success), length, received_at, score
     )
 
 
@@ -498,7 +505,15 @@ class Store:
         self, curriculum_id: int, results: Sequence[NewResult], on_commit: Callback = None, on_abort: Callback = None
     ) -> asyncio.Future[None]:
         rows = [
-            (curriculum_id, result.task_index, result.reward, result.success, result.length, result.received_at)
+            (
+                curriculum_id,
+                result.task_index,
+                result.reward,
+                result.success,
+                result.length,
+                result.received_at,
+                result.score,
+            )
             for result in results
         ]
         return self._write([(_INSERT_RESULT, rows)], on_commit=on_commit, on_abort=on_abort)

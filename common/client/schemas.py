@@ -24,6 +24,8 @@ CURRICULUM_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_TASKS_PER_REQUEST = 1024
 MAX_RESULTS_PER_REQUEST = 1024
 MAX_SEED = 2**63 - 1
+MAX_SCORE = 1e12
+"""A result's score is bounded so every teacher's arithmetic on it stays finite."""
 """Seeds and lengths are stored as SQLite integers, which are signed 64-bit."""
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -127,6 +129,11 @@ class TaskRequest(_Request):
 class IssuedTask(BaseModel):
     task_id: str
     params: TaskValues
+    score_only: bool = Field(
+        default=False,
+        description="Play this episode and report its result, but leave its transitions out of the policy "
+        "update: robust PLR scores a new level this way before it may train on it.",
+    )
 
 
 class TaskBatch(BaseModel):
@@ -138,6 +145,14 @@ class ResultItem(_Request):
     reward: FiniteFloat
     success: bool | None = None
     length: int | None = Field(default=None, ge=0, le=MAX_SEED)
+    score: FiniteFloat | None = Field(
+        default=None,
+        ge=-MAX_SCORE,
+        le=MAX_SCORE,
+        description="How much the episode has left to teach, as the learner measures it (PLR's positive value "
+        "loss: the mean over its steps of max(GAE advantage, 0)). The level kinds use it; without it they "
+        "fall back on the return or success, and the other kinds ignore it.",
+    )
 
 
 class ResultBatch(_Request):
@@ -172,6 +187,7 @@ class RecentResult(BaseModel):
     success: bool | None
     length: int | None
     received_at: float
+    score: float | None = None
 
 
 class CurriculumState(BaseModel):

@@ -48,10 +48,15 @@ class EpisodeResult:
     reward: float
     success: bool | None = None
     length: int | None = None
+    score: float | None = None
+    """The learner's measure of what the episode has left to teach (PLR's positive value loss), when
+    it sends one; the level kinds read it, the rest ignore it."""
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.reward):
             raise ValueError(f"reward must be finite, got {self.reward}")
+        if self.score is not None and not math.isfinite(self.score):
+            raise ValueError(f"score must be finite, got {self.score}")
 
 
 @dataclass(frozen=True)
@@ -81,7 +86,8 @@ def parameter_type_problem(kind: str, accepted: frozenset[ParameterType], space:
         if parameter.type not in accepted:
             takes = " and ".join(sorted(accepted))
             return (
-                f"parameter {parameter.name!r} is an {parameter.type} parameter: "
+                f"parameter {parameter.name!r} is {'an' if parameter.type == 'integer' else 'a'} {parameter.type} "
+                "parameter: "
                 f"the {kind} teacher takes {takes} parameters only"
             )
     return None
@@ -114,7 +120,7 @@ class Teacher(ABC):
         """``params`` may be the kind's model, a mapping of name to value, or ``None`` for the defaults."""
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        refused = parameter_type_problem(self.kind, self.parameter_types, space)
+        refused = self.space_problem(space)
         if refused is not None:
             raise ValueError(refused)
         self.space = space
@@ -135,6 +141,19 @@ class Teacher(ABC):
         tasks = self._draw(self.tasks_drawn, count)
         self.tasks_drawn += count
         return tasks
+
+    def sample_marked(self, count: int) -> tuple[list[Task], list[bool]]:
+        """``sample``, and for each task whether its episode is for scoring only: the learner plays it
+        and reports its result but leaves its transitions out of the update (robust PLR's new levels)."""
+        first_index = self.tasks_drawn
+        tasks = self.sample(count)
+        return tasks, self._score_only(first_index, count)
+
+    @classmethod
+    def space_problem(cls, space: TaskSpace) -> str | None:
+        """Why this kind cannot teach ``space`` (naming the parameter or the limit), else None; the
+        service refuses such a curriculum with a 422 before storing anything."""
+        return parameter_type_problem(cls.kind, cls.parameter_types, space)
 
     def skip(self, count: int) -> None:
         """Move past ``count`` tasks handed out before a restart, so the next ``sample`` continues
@@ -253,6 +272,11 @@ class Teacher(ABC):
     @abstractmethod
     def _draw(self, first_index: int, count: int) -> list[Task]:
         """Tasks number ``first_index`` to ``first_index + count - 1``."""
+
+    def _score_only(self, first_index: int, count: int) -> list[bool]:
+        """Which of the tasks just drawn (``first_index`` on) are for scoring only; none, but for
+        robust PLR."""
+        return [False] * count
 
     @abstractmethod
     def _learn_validated(self, result: EpisodeResult) -> FitJob | None:

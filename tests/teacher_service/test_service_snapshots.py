@@ -24,6 +24,7 @@ import pytest
 from common.client.schemas import ParameterSpec
 from common.kuka.task_space import KUKA_TASK_SPACE
 from teacher_service.process import ServiceProcess
+from teacher_service.store import SCHEMA_VERSION
 from teacher_service.teachers import EpisodeResult, FitJob, Teacher, make_teacher
 
 SEED = 5
@@ -344,7 +345,7 @@ def test_a_version_1_database_is_migrated_replayed_once_and_then_restarts_from_a
         mirror = Mirror(api_for(service), "old", "alp-gmm")
         mirror.reference = mirror_reference
         with sqlite3.connect(db) as connection:
-            assert connection.execute("PRAGMA user_version").fetchone()[0] == 2
+            assert connection.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
             models = connection.execute("SELECT fit_index, model IS NOT NULL FROM fits ORDER BY fit_index").fetchall()
             assert models == [(0, 1), (1, 1), (2, 1)], "the first start stores the models of the fits it ran"
             assert connection.execute("SELECT results_seen FROM snapshots").fetchall() == [(56,)]
