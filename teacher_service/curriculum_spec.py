@@ -19,7 +19,6 @@ from typing_extensions import Self
 
 from common.client.schemas import CurriculumSpec, CurriculumSpecBase, ParameterSpec
 from teacher_service.teachers import TEACHER_KINDS, Teacher, TeacherParams
-from teacher_service.teachers.base import parameter_type_problem
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +32,7 @@ class TypedSpec(CurriculumSpecBase):
     @model_validator(mode="after")
     def _kind_takes_the_space(self) -> Self:
         teacher = TEACHER_KINDS[self.teacher]
-        problem = parameter_type_problem(self.teacher, teacher.parameter_types, self.task_space())
+        problem = teacher.space_problem(self.task_space())
         if problem is not None:
             raise ValueError(problem)
         return self

@@ -17,6 +17,7 @@ from teacher_service.teachers.base import BuildJob, EpisodeResult, FitJob, Teach
 from teacher_service.teachers.covar_gmm import CovarGmmTeacher
 from teacher_service.teachers.currot import CurrotTeacher
 from teacher_service.teachers.learnability import LearnabilityTeacher
+from teacher_service.teachers.levels import LearningProgressTeacher, PlrTeacher
 from teacher_service.teachers.manual import ManualTeacher
 from teacher_service.teachers.params import TeacherParams
 from teacher_service.teachers.riac import RiacTeacher
@@ -37,6 +38,8 @@ TEACHER_KINDS: Mapping[str, type[Teacher]] = MappingProxyType(
             CovarGmmTeacher,
             RiacTeacher,
             LearnabilityTeacher,
+            PlrTeacher,
+            LearningProgressTeacher,
         )
     }
 )

@@ -37,6 +37,13 @@ current policy and keeps a buffer of the top-K levels; here p comes from the hel
 (no extra rollouts), candidates are sampled in proportion to learnability rather than uniformly
 among the top K (``top_k`` restricts to the K best), and replays are tasks from the held results.
 
+Over levels (an all-integer space of at most ``MAX_LEVELS`` levels) the estimate needs no
+neighbours: every refresh scores every level from its own held results, p = (its successes +
+prior_weight * prior_success) / (its results + prior_weight), so a level not played lately sits at the
+prior; ``pool_size``, ``replay_share`` and ``neighbours`` play no part. A fresh draw is a uniform
+level. This is SFL's p(1 - p) per level with p from the training episodes rather than from extra
+rollouts, and Syllabus's ``Learnability`` with its top-K and uniform mix (``top_k``, ``fresh_share``).
+
 When it helps: students whose outcome is mostly solved-or-not per task, such as grasping, where
 the frontier between solved and unsolved tasks is where learning happens. When it fails: a task's
 success rate that is not smooth at the scale of its neighbours (the estimate blurs it), and
@@ -55,6 +62,7 @@ from scipy.spatial import cKDTree
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
+from teacher_service.teachers.levels import LEVELS_SHOWN, level_space_problem
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
 from teacher_service.teachers.performance import UNKNOWN_SUCCESS
 from teacher_service.teachers.row_log import RowLog
@@ -105,6 +113,7 @@ class LearnabilityTeacher(Teacher):
     See the module docstring for the estimate, the bounds and where it departs from SFL."""
 
     kind = "learnability"
+    parameter_types = frozenset({"float", "integer"})
     Params = LearnabilityParams
     params: LearnabilityParams
     state_fields = (
@@ -125,11 +134,27 @@ class LearnabilityTeacher(Teacher):
         self._success = np.empty(0)
         self._bar: float | None = None
         self._cdf = np.empty(0)
+        self._levels = space.level_count() if space.types == frozenset({"integer"}) else 0
+        """The level count of an all-integer space (each level scored on its own), else 0 (a box)."""
+
+    @classmethod
+    def space_problem(cls, space: TaskSpace) -> str | None:
+        """A box of floats, or up to ``MAX_LEVELS`` levels of integers; not both in one space."""
+        if space.types == frozenset({"float", "integer"}):
+            return (
+                f"parameter {space.names[int(np.argmax(space.integer))]!r} is an integer parameter among float ones: "
+                "the learnability teacher takes a box of float parameters or a space of integer ones (levels), not both"
+            )
+        return super().space_problem(space) or level_space_problem(cls.kind, space)
 
     def _draw(self, first_index: int, count: int) -> list[Task]:
         # Per task: fresh or replay, which candidate, and the coordinates of a fresh task.
         uniforms = indexed_uniforms(self.seed, TASK_STREAM, first_index, count, 2 + self._dims)
         units = uniforms[:, 2:].copy()
+        if self._levels:
+            # A fresh draw is a uniform level: level i owns [i / n, (i + 1) / n) of the third uniform.
+            fresh_levels = np.minimum((uniforms[:, 2] * self._levels).astype(np.int64), self._levels - 1)
+            units = self._level_units(fresh_levels)
         if len(self._pool):
             replay = uniforms[:, 0] >= self.params.fresh_share
             picks = np.minimum(np.searchsorted(self._cdf, uniforms[replay, 1], side="right"), len(self._pool) - 1)
@@ -160,9 +185,31 @@ class LearnabilityTeacher(Teacher):
             outcomes[unflagged] = (rewards[unflagged] > bar).astype(float)
         return outcomes, bar
 
+    def _level_units(self, levels: np.ndarray) -> np.ndarray:
+        """The unit coordinates of levels ``levels`` (one row each)."""
+        tasks = np.array([self.space.to_array(self.space.level_task(int(level))) for level in levels])
+        return self.space.to_unit(tasks.reshape(len(levels), self._dims))
+
+    def _refresh_levels(self, held: np.ndarray) -> None:
+        """Every level scored from its own held results, with the prior's pseudo-results."""
+        self.refreshes += 1
+        outcomes, self._bar = self._outcomes(held)
+        tasks = [self.space.from_array(row) for row in self.space.from_unit(held[:, : self._dims])]
+        played = np.array([self.space.task_level(task) for task in tasks], dtype=np.int64)
+        results = np.bincount(played, minlength=self._levels)
+        successes = np.bincount(played, weights=outcomes, minlength=self._levels)
+        params = self.params
+        self._pool = self._level_units(np.arange(self._levels))
+        self._success = (successes + params.prior_weight * params.prior_success) / (results + params.prior_weight)
+        self._refresh_choice()
+
     def _refresh(self) -> None:
-        """A new pool: replayed and uniform candidates, each scored from its nearest held results."""
+        """A new pool: replayed and uniform candidates, each scored from its nearest held results
+        (over levels: every level, from its own)."""
         held = self._held()
+        if self._levels:
+            self._refresh_levels(held)
+            return
         params = self.params
         generator = np.random.default_rng([self.seed, POOL_STREAM, self.refreshes])
         self.refreshes += 1
@@ -214,6 +261,8 @@ class LearnabilityTeacher(Teacher):
     def _describe(self) -> dict[str, Any]:
         learnability = self._success * (1.0 - self._success)
         chance = np.diff(self._cdf, prepend=0.0) if len(self._cdf) else self._cdf
+        if self._levels:
+            return {"refreshes": self.refreshes, "return_bar": self._bar, **self._level_table(learnability, chance)}
         return {
             "refreshes": self.refreshes,
             "return_bar": self._bar,
@@ -222,4 +271,25 @@ class LearnabilityTeacher(Teacher):
             "pool_success": self._success.tolist(),
             "pool_learnability": learnability.tolist(),
             "pool_probability": (chance * (1.0 - self.params.fresh_share)).tolist(),
+        }
+
+    def _level_table(self, learnability: np.ndarray, chance: np.ndarray) -> dict[str, Any]:
+        """The ``LEVELS_SHOWN`` likeliest next levels, as the other level kinds show theirs."""
+        fresh = self.params.fresh_share if len(chance) else 1.0  # uniform until the first refresh
+        probability = np.full(self._levels, fresh / self._levels)
+        if len(chance):
+            probability += chance * (1.0 - fresh)
+        shown = np.argsort(-probability, kind="stable")[:LEVELS_SHOWN]
+        return {
+            "level_count": self._levels,
+            "levels": [
+                {
+                    "level": int(level),
+                    "task": self.space.level_task(int(level)),
+                    "probability": float(probability[level]),
+                    "success": float(self._success[level]) if len(self._success) else None,
+                    "learnability": float(learnability[level]) if len(learnability) else None,
+                }
+                for level in shown
+            ],
         }

@@ -55,7 +55,12 @@ def test_the_manual_plans_parameters_carry_their_bounds_types_and_choices(catalo
 def test_each_listed_bound_is_enforced_and_the_listed_defaults_are_accepted(catalogue, http, kuka_space):
     for kind, entry in catalogue.items():
         defaults = {p["name"]: p["default"] for p in entry["parameters"]}
-        body = {"teacher": kind, "space": kuka_space, "params": defaults, "seed": 0}
+        space = (
+            kuka_space
+            if "float" in entry["parameter_types"]
+            else [{"name": "level", "type": "integer", "low": 0, "high": 9}]
+        )
+        body = {"teacher": kind, "space": space, "params": defaults, "seed": 0}
         assert http.put(f"/curricula/listed-{kind}", json=body).status_code == 201
         for parameter in entry["parameters"]:
             step = 1 if parameter["type"].startswith("integer") else 0.5

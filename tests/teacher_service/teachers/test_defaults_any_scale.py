@@ -21,6 +21,8 @@ from teacher_service.teachers import TEACHER_KINDS, EpisodeResult, Teacher, make
 
 UNIT_SQUARE = TaskSpace([Parameter(name, 0.0, 1.0, easiest=0.0, hardest=1.0) for name in ("x0", "x1")])
 CUBES = 10
+LEVEL_GRID = TaskSpace([Parameter(name, 0, CUBES - 1, type="integer") for name in ("x0", "x1")])
+"""The same toy over levels, one level per cube, for the kinds that teach levels only."""
 EPISODES = 1500
 DRAWS = 4000
 MOVED = 0.25
@@ -42,7 +44,9 @@ class Toy:
 
 
 def cube_of(task: dict[str, float]) -> tuple[int, int]:
-    x0, x1 = (min(int(task[name] * CUBES), CUBES - 1) for name in ("x0", "x1"))
+    x0, x1 = (
+        value if isinstance(value := task[name], int) else min(int(value * CUBES), CUBES - 1) for name in ("x0", "x1")
+    )
     return x0, x1
 
 
@@ -55,7 +59,8 @@ def histogram(teacher: Teacher) -> np.ndarray:
 
 def moved(kind: str) -> float:
     """Total variation between the cubes drawn before and after ``EPISODES`` toy results."""
-    teacher = make_teacher(kind, UNIT_SQUARE, seed=1)
+    space = UNIT_SQUARE if "float" in TEACHER_KINDS[kind].parameter_types else LEVEL_GRID
+    teacher = make_teacher(kind, space, seed=1)
     before = histogram(teacher)
     toy = Toy()
     for _ in range(EPISODES):

@@ -25,11 +25,22 @@ KIND_PARAMS: dict[str, dict[str, Any]] = {
     "covar-gmm": {"fit_rate": 40, "max_components": 4},
     "riac": {"max_region_size": 30},
     "learnability": {"pool_size": 40, "update_every": 20, "buffer_size": 60, "top_k": 10},
+    "plr": {"robust": True},
+    "learning-progress": {"update_every": 10},
 }
+LEVELS = TaskSpace(
+    [Parameter("seed", 0, 199, type="integer", hardest=199), Parameter("layout", 1, 3, type="integer", hardest=3)]
+)
+"""A MultiDiscrete space of 600 levels, for the kinds that teach levels only."""
+
+
+def space_of(kind: str) -> TaskSpace:
+    """KUKA's box for the kinds that teach floats; a level space for those that teach integers only."""
+    return KUKA_TASK_SPACE if "float" in TEACHER_KINDS[kind].parameter_types else LEVELS
 
 
 def build(kind: str, seed: int = 3) -> Teacher:
-    return make_teacher(kind, KUKA_TASK_SPACE, seed, KIND_PARAMS[kind])
+    return make_teacher(kind, space_of(kind), seed, KIND_PARAMS[kind])
 
 
 def assert_in_bounds(space: TaskSpace, tasks: list[dict[str, float]]) -> None:
@@ -60,7 +71,7 @@ def test_every_kind_is_registered() -> None:
 def test_tasks_stay_inside_the_box(kind: str) -> None:
     teacher = build(kind)
     handed_out = run_student(teacher, 200, batch=7)
-    assert_in_bounds(KUKA_TASK_SPACE, handed_out + teacher.sample(2000))
+    assert_in_bounds(space_of(kind), handed_out + teacher.sample(2000))
 
 
 @pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
@@ -132,6 +143,8 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
         "covar-gmm": ("fits", 3),
         "riac": ("splits", 2),
         "learnability": ("refreshes", 3),
+        "plr": ("scored_levels", 50),
+        "learning-progress": ("levels_played", 30),
     }
     if kind in learned:
         entry, least = learned[kind]
@@ -221,13 +234,17 @@ def test_bad_seeds_are_rejected(seed: Any) -> None:
 @pytest.mark.parametrize("kind", sorted(KIND_PARAMS))
 def test_bad_input_is_rejected_without_changing_the_teacher(kind: str) -> None:
     teacher = build(kind)
-    outside = {**KUKA_TASK_SPACE.hardest(), "rnd_obj_x": 1.5}
-    with pytest.raises(ValueError, match="rnd_obj_x"):
+    space = space_of(kind)
+    name = space.names[0]
+    outside = {**space.hardest(), name: space.parameters[0].high + 1}
+    with pytest.raises(ValueError, match=name):
         teacher.learn(EpisodeResult(outside, 1.0))
     with pytest.raises(ValueError, match="count must be a non-negative integer"):
         teacher.sample(-1)
     with pytest.raises(ValueError, match="reward must be finite"):
-        EpisodeResult(KUKA_TASK_SPACE.hardest(), float("inf"))
+        EpisodeResult(space.hardest(), float("inf"))
+    with pytest.raises(ValueError, match="score must be finite"):
+        EpisodeResult(space.hardest(), 1.0, score=float("nan"))
     assert teacher.results_seen == 0 and teacher.tasks_drawn == 0
 
 
