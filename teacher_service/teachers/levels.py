@@ -66,7 +66,8 @@ class _LevelTeacher(Teacher):
         self.sampler.loaded()
 
     def _level_table(self, columns: Mapping[str, np.ndarray]) -> dict[str, Any]:
-        """The ``LEVELS_SHOWN`` likeliest next levels, most likely first, with ``columns`` per level."""
+        """The ``LEVELS_SHOWN`` likeliest next levels, most likely first, with ``columns`` per level (a
+        NaN, such as an unscored level's score, shows as null)."""
         probability = self.sampler.probabilities()
         shown = np.argsort(-probability, kind="stable")[:LEVELS_SHOWN]
         return {
@@ -76,11 +77,15 @@ class _LevelTeacher(Teacher):
                     "level": int(level),
                     "task": self.space.level_task(int(level)),
                     "probability": float(probability[level]),
-                    **{name: float(values[level]) for name, values in columns.items()},
+                    **{name: _number(values[level]) for name, values in columns.items()},
                 }
                 for level in shown
             ],
         }
+
+
+def _number(value: float) -> float | None:
+    return None if np.isnan(value) else float(value)
 
 
 class PlrParams(TeacherParams):
@@ -157,7 +162,12 @@ class PlrTeacher(_LevelTeacher):
         return {
             "scored_levels": int(sampler.seen.sum()),
             "replay_chance": sampler.replay_chance(),
-            **self._level_table({"score": sampler.scores, "staleness": sampler.draws - sampler.last_drawn}),
+            **self._level_table(
+                {
+                    "score": np.where(sampler.seen, sampler.scores, np.nan),
+                    "staleness": (sampler.draws - sampler.last_drawn).astype(float),
+                }
+            ),
         }
 
 

@@ -340,7 +340,11 @@ def assert_state_drawn(page: Page, teacher: dict[str, Any], x: str, y: str) -> N
         assert rows[0].split("\t")[-1] == moves[-1]["why"], "newest first"
 
 
-@pytest.mark.parametrize("kind", sorted(TEACHER_KINDS))
+BOX_KINDS = sorted(kind for kind, teacher in TEACHER_KINDS.items() if "float" in teacher.parameter_types)
+LEVEL_KINDS = sorted(kind for kind, teacher in TEACHER_KINDS.items() if "integer" in teacher.parameter_types)
+
+
+@pytest.mark.parametrize("kind", BOX_KINDS)
 def test_every_kind_renders_its_own_state_with_no_console_error(
     browser: Browser, service: ServiceProcess, kind: str
 ) -> None:
@@ -360,6 +364,45 @@ def test_every_kind_renders_its_own_state_with_no_console_error(
     assert set(shown) == set(scalars) - {"kind", "seed", "tasks_sampled", "results_seen"}
     select_dimensions(page, "jp2", "jp4")
     assert_state_drawn(page, teacher, "jp2", "jp4")
+    page.wait_for_timeout(3000)  # one more poll, which must redraw cleanly too
+    assert problems == PageProblems()
+    page.close()
+
+
+@pytest.mark.parametrize("kind", sorted(set(LEVEL_KINDS) - {"random", "fixed", "manual"}))
+def test_a_level_kind_shows_its_likeliest_levels_with_no_console_error(
+    browser: Browser, service: ServiceProcess, kind: str
+) -> None:
+    name = f"levels-{kind}"
+    space = [
+        {"name": "seed", "type": "integer", "low": 0, "high": 59},
+        {"name": "layout", "type": "integer", "low": 0, "high": 1},
+    ]
+    body = {"teacher": kind, "space": space, "params": {"update_every": 20} if kind != "plr" else {}, "seed": 3}
+    with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula", headers=WRITES, timeout=10) as client:
+        assert client.put(f"/{name}", json=body).status_code == 201
+        for _ in range(6):
+            tasks = client.post(f"/{name}/tasks", json={"count": 40}).raise_for_status().json()["tasks"]
+            results = [
+                {
+                    "task_id": t["task_id"],
+                    "reward": 1.0,
+                    "success": t["params"]["seed"] % 3 == 0,
+                    "score": t["params"]["seed"] / 59,
+                }
+                for t in tasks
+            ]
+            client.post(f"/{name}/results", json={"results": results}).raise_for_status()
+        teacher = client.get(f"/{name}/state").raise_for_status().json()["teacher"]
+
+    page, problems = open_page(browser, f"{service.url}/curricula/{name}", service)
+    page.wait_for_function("() => (document.getElementById('levels-plot').data || []).length > 0")
+    bars = traces(page, "levels-plot")["levels"][0]
+    assert bars["x"] == [f"#{row['level']}" for row in teacher["levels"]]
+    assert bars["y"] == pytest.approx([row["probability"] for row in teacher["levels"]])
+    assert bars["y"] == sorted(bars["y"], reverse=True), "the likeliest level first"
+    assert page.inner_text("#levels-note") == "the 100 likeliest next of 120"
+    assert definitions(page, "#teacher-state")["level_count"] == "120"
     page.wait_for_timeout(3000)  # one more poll, which must redraw cleanly too
     assert problems == PageProblems()
     page.close()

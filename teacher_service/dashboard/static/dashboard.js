@@ -704,15 +704,16 @@ function stateMarks(teacher, xName, yName) {
   return traces;
 }
 
-/** The teacher card: its scalar state entries and the history of its `moves`. */
+/** The teacher card: its scalar state entries, the history of its `moves`, and a level kind's likeliest levels. */
 function renderTeacherState(state) {
   const teacher = state.teacher;
   const scalars = Object.entries(teacher).filter(
     ([name, value]) => !STATE_SHOWN_ELSEWHERE.has(name) && (value === null || typeof value !== "object"),
   );
   const moves = teacher.moves ?? null;
+  const levels = Array.isArray(teacher.levels) ? teacher.levels : null;
   const card = document.getElementById("teacher-card");
-  card.hidden = !scalars.length && moves === null;
+  card.hidden = !scalars.length && moves === null && levels === null;
   if (card.hidden) return;
   document.getElementById("teacher-state").replaceChildren(
     ...scalars.map(([name, value]) => {
@@ -726,6 +727,32 @@ function renderTeacherState(state) {
   );
   document.getElementById("moves-box").hidden = moves === null;
   if (moves !== null) renderMoves(moves, teacher.moves_total ?? moves.length);
+  document.getElementById("levels-box").hidden = levels === null;
+  if (levels !== null) renderLevels(levels, teacher.level_count ?? levels.length);
+}
+
+/** A level kind's `levels`: the likeliest next draws, most likely first, each with its own columns on hover. */
+function renderLevels(levels, total) {
+  setText("levels-note", `the ${formatNumber(levels.length)} likeliest next of ${formatNumber(total)}`);
+  const shownApart = new Set(["level", "task", "probability"]);
+  Plotly.react(
+    document.getElementById("levels-plot"),
+    [{
+      meta: "levels", name: "levels", type: "bar", marker: { color: "#2563eb" },
+      x: levels.map((row) => `#${row.level}`), y: levels.map((row) => row.probability),
+      text: levels.map((row) => Object.entries(row).filter(([name]) => !shownApart.has(name))
+        .map(([name, value]) => `${name} ${formatValue(value)}`).join("<br>")),
+      textposition: "none",
+      hovertemplate: "level %{x}: chance %{y:.3f}<br>%{text}<extra></extra>",
+    }],
+    baseLayout({
+      margin: { l: 52, r: 16, t: 8, b: 40 },
+      xaxis: axis("level", { type: "category", showticklabels: levels.length <= 30 }),
+      yaxis: axis("chance of the next draw", { rangemode: "tozero" }),
+      uirevision: "levels",
+    }),
+    PLOT_CONFIG,
+  );
 }
 
 function renderMoves(moves, total) {
