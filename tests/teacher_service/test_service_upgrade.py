@@ -150,3 +150,33 @@ def test_a_database_from_another_version_starts_and_serves_what_it_can(service: 
         assert particles.teacher_state() == _as_json(particles.reference.state())
         particles.step(8)
         assert particles.teacher_state() == _as_json(particles.reference.state())
+
+
+def test_a_registration_sent_again_after_an_upgrade_that_added_parameters_joins_the_same_curriculum(
+    service: ServiceProcess,
+) -> None:
+    """A curriculum stored by a version before ``estimate`` and ``recent_results`` (CURROT's) and before
+    parameter types: the same request a client sent then, sent again to today's service, is the same
+    curriculum (200), not a 409; so is today's request with the new parameters at their defaults."""
+    old_request = {"teacher": "currot", "space": SPACE, "params": CURROT, "seed": SEED}
+    with service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0) as api:
+        assert api.put("/curricula/older", json=old_request).status_code == 201
+    with sqlite3.connect(service.db) as connection:
+        (spec,) = connection.execute("SELECT spec FROM curricula WHERE name = 'older'").fetchone()
+        stored = json.loads(spec)
+        for added in ("estimate", "recent_results"):
+            del stored["params"][added]
+        for parameter in stored["space"]:
+            del parameter["type"]
+        connection.execute("UPDATE curricula SET spec = ? WHERE name = 'older'", (json.dumps(stored),))
+    with service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=30.0) as api:
+        again = api.put("/curricula/older", json=old_request)
+        assert again.status_code == 200, again.text
+        defaults = {
+            **CURROT,
+            "estimate": "buffers",
+            "recent_results": again.json()["config"]["params"]["recent_results"],
+        }
+        assert api.put("/curricula/older", json={**old_request, "params": defaults}).status_code == 200
+        changed = api.put("/curricula/older", json={**old_request, "params": {**CURROT, "estimate": "recent"}})
+        assert changed.status_code == 409, "a real difference still conflicts"
