@@ -103,6 +103,9 @@ class Assignment:
 
     task_id: str | None
     params: Task
+    score_only: bool = False
+    """Play the episode and report it, but leave its transitions out of the policy update (robust
+    PLR's new levels)."""
 
     @property
     def offline(self) -> bool:
@@ -240,22 +243,32 @@ class TeacherClient:
             return
         self._offline = False
         for task in TaskBatch.model_validate(answer).tasks:
-            self._tasks.append(Assignment(task.task_id, task.params))
+            self._tasks.append(Assignment(task.task_id, task.params, task.score_only))
             self._recent.append(task.params)
 
     def report(
-        self, assignment: Assignment, reward: float, success: bool | None = None, length: int | None = None
+        self,
+        assignment: Assignment,
+        reward: float,
+        success: bool | None = None,
+        length: int | None = None,
+        score: float | None = None,
     ) -> None:
-        """Queue an episode's result for delivery; raises ``ValueError`` for a non-finite reward."""
+        """Queue an episode's result for delivery, with the learner's ``score`` for the level kinds
+        when it has one (see ``ResultItem.score``); raises ``ValueError`` for a non-finite reward or score."""
         if self._fatal is not None:
             raise self._fatal
         if not math.isfinite(reward):
             raise ValueError(f"reward must be finite, got {reward}")
+        if score is not None and not math.isfinite(score):
+            raise ValueError(f"score must be finite, got {score}")
         with self._results_changed:
             if assignment.task_id is None:
                 self.offline_results += 1
                 return
-            self._results.append(ResultItem(task_id=assignment.task_id, reward=reward, success=success, length=length))
+            self._results.append(
+                ResultItem(task_id=assignment.task_id, reward=reward, success=success, length=length, score=score)
+            )
             burst_starts = len(self._results) > self.max_buffered_results and self._drop_oldest()
             self._results_changed.notify_all()
         if burst_starts:

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 import httpx
 import pytest
 
+from common.client.task_space import Parameter, TaskSpace
 from common.client.teacher_client import (
     Assignment,
     Backoff,
@@ -74,6 +75,20 @@ def test_register_draw_and_report(service):
         assert [r.task_id for r in recent] == [r.task_id for r in client.state().recent_results[-5:]]
     counters = _counters(service, "basic")
     assert counters["results_received"] == 40 and counters["tasks_outstanding"] == 0
+
+
+def test_level_tasks_say_score_only_and_results_carry_a_score(service):
+    levels = TaskSpace([Parameter("level", 0, 19, type="integer")])
+    with _client(service, "robust-levels", prefetch=8) as client:
+        client.register("plr", levels, params={"robust": True}, seed=1)
+        first = client.next_task()
+        assert first.score_only and isinstance(first.params["level"], int), "nothing scored: explore, score only"
+        client.report(first, reward=1.0, success=True, score=0.25)
+        with pytest.raises(ValueError, match="score must be finite"):
+            client.report(first, reward=1.0, score=float("nan"))
+        assert client.flush(timeout=30)
+        (result,) = client.state(recent=1).recent_results
+        assert (result.task_id, result.score) == (first.task_id, 0.25)
 
 
 def test_no_result_is_lost_across_a_service_restart(service):
