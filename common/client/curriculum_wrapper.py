@@ -12,7 +12,15 @@ At each ``reset`` the wrapper takes the curriculum's next task and applies it, b
 task)`` for an environment that takes its parameters another way. When an episode ends it reports
 the return, the length and, when the environment puts ``is_success`` in ``info``, the success. The
 task and its id (``None`` for an offline task, see below) are in the ``info`` of the reset and of
-the step that ends the episode. An episode cut short by an early ``reset`` is not reported.
+the step that ends the episode, with ``score_only`` (robust PLR's: leave the episode out of the
+update). An episode cut short by an early ``reset`` is not reported.
+
+With ``scores_from_learner=True`` an ended episode waits for its score instead of being reported at
+once: the learner computes it once its advantages are known (PLR's positive value loss, the mean over
+the episode's steps of max(GAE advantage, 0)) and hands each environment's scores, in the order its
+episodes ended, to ``report_scores`` (through ``VecEnv.env_method`` from a Stable-Baselines3 callback:
+``examples/sb3_minigrid_plr.py``). At most ``MAX_UNSCORED`` episodes wait; past that, and at
+``close``, the oldest go without a score, and the teacher falls back on the return or success.
 
 The constructor checks the curriculum at once, so a typo in the name, a wrong token or a teacher
 that does not answer fails with ``CurriculumError`` where the environment is made, not in the
@@ -33,7 +41,8 @@ import atexit
 import logging
 import os
 import threading
-from collections.abc import Callable, Mapping
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, SupportsFloat
 
@@ -75,6 +84,18 @@ class CurriculumRegistration:
     seed: int = 0
 
 
+MAX_UNSCORED = 1024
+"""Ended episodes that wait for a score, per environment; the oldest is reported without one beyond."""
+
+
+@dataclass(frozen=True)
+class _EndedEpisode:
+    assignment: Assignment
+    episode_return: float
+    success: bool | None
+    length: int
+
+
 class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
     """Runs each episode on the next task of a teacher-service curriculum and reports its result."""
 
@@ -92,10 +113,12 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         report_interval: float = 1.0,
         startup_timeout: float = 10.0,
         close_timeout: float = 30.0,
+        scores_from_learner: bool = False,
     ) -> None:
         """``token`` defaults to ``$KC_TEACHER_TOKEN``. ``prefetch`` tasks are drawn per request for
         the whole process, whose results are sent together every ``report_interval`` seconds (see
-        ``TeacherClient``). ``startup_timeout`` bounds the check made here."""
+        ``TeacherClient``). ``startup_timeout`` bounds the check made here. ``scores_from_learner``:
+        hold each ended episode until ``report_scores`` gives its score (see the module doc)."""
         super().__init__(env)
         self.teacher_url = teacher_url.rstrip("/")
         self.curriculum = curriculum
@@ -114,6 +137,8 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         self._assignment: Assignment | None = None
         self._episode_return = 0.0
         self._episode_length = 0
+        self.scores_from_learner = scores_from_learner
+        self._unscored: deque[_EndedEpisode] = deque()
         _check_curriculum(self._client_key, register, startup_timeout)
 
     def reset(
@@ -145,18 +170,38 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
         self._episode_length += 1
         if terminated or truncated:
             success = info.get("is_success")
-            self._teacher().report(
-                assignment,
-                self._episode_return,
-                success=None if success is None else bool(success),
-                length=self._episode_length,
+            ended = _EndedEpisode(
+                assignment, self._episode_return, None if success is None else bool(success), self._episode_length
             )
+            if self.scores_from_learner:
+                self._unscored.append(ended)
+                if len(self._unscored) > MAX_UNSCORED:
+                    self._report(self._unscored.popleft(), None)
+            else:
+                self._report(ended, None)
             self._assignment = None
             info = self._with_task(info, assignment)
         return observation, reward, terminated, truncated, info
 
+    def report_scores(self, scores: Sequence[float]) -> int:
+        """Report the oldest ended episodes still waiting, one per score, in the order they ended;
+        returns how many wait after them. More scores than waiting episodes is a ``ValueError``."""
+        if len(scores) > len(self._unscored):
+            raise ValueError(f"{len(scores)} scores for {len(self._unscored)} ended episodes waiting for one")
+        for score in scores:
+            self._report(self._unscored.popleft(), float(score))
+        return len(self._unscored)
+
+    def _report(self, ended: _EndedEpisode, score: float | None) -> None:
+        self._teacher().report(
+            ended.assignment, ended.episode_return, success=ended.success, length=ended.length, score=score
+        )
+
     def close(self) -> None:
-        """Deliver this process's buffered results (up to ``close_timeout``), then close the env."""
+        """Report episodes still waiting for a score without one, deliver this process's buffered
+        results (up to ``close_timeout``), then close the env."""
+        while self._unscored:
+            self._report(self._unscored.popleft(), None)
         if self._client is not None and self._client_pid == os.getpid():
             _release_client(self._client_key, self.close_timeout)
         self._client = None
@@ -171,7 +216,12 @@ class CurriculumWrapper(gymnasium.Wrapper[ObsType, ActType, ObsType, ActType]):
 
     @staticmethod
     def _with_task(info: dict[str, Any], assignment: Assignment) -> dict[str, Any]:
-        return {**info, "task": dict(assignment.params), "task_id": assignment.task_id}
+        return {
+            **info,
+            "task": dict(assignment.params),
+            "task_id": assignment.task_id,
+            "score_only": assignment.score_only,
+        }
 
 
 @dataclass(frozen=True)

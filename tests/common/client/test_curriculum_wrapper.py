@@ -247,3 +247,19 @@ def test_the_token_shows_in_no_repr(service, monkeypatch):
         shown = [repr(env), str(env), repr(env._client_key), repr(vars(env)), repr(env._client)]
         assert not [text for text in shown if TOKEN in text]
         env.close()
+
+
+def test_with_scores_from_the_learner_an_episode_waits_for_its_score(service):
+    env = wrap(service, "echo-scored", register=RANDOM_ECHO, scores_from_learner=True, report_interval=0.05)
+    played = play(env, 5)
+    assert all(final_info["score_only"] is False for _, final_info in played)
+    time.sleep(0.5)
+    assert counters(service, "echo-scored")["results_received"] == 0, "nothing is sent before its score"
+    assert env.report_scores([0.5, 0.25, 0.125]) == 2, "two ended episodes still wait"
+    with pytest.raises(ValueError, match="3 scores for 2 ended episodes"):
+        env.report_scores([1.0, 1.0, 1.0])
+    env.close()  # the last two go without a score
+
+    results = received(service, "echo-scored")
+    scores = [results[reset_info["task_id"]]["score"] for reset_info, _ in played]
+    assert scores == [0.5, 0.25, 0.125, None, None], "each score goes to its episode, in the order they ended"
