@@ -61,7 +61,8 @@ class Connection:
         writer.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         return cls(reader, writer, host)
 
-    async def post(self, path: str, payload: object) -> object:
+    async def send(self, path: str, payload: object) -> tuple[int, bytes]:
+        """POST ``payload`` as JSON; the status and the body of the answer."""
         body = json.dumps(payload).encode()
         head = (
             f"POST {path} HTTP/1.1\r\nHost: {self._host}\r\nContent-Type: application/json\r\n"
@@ -71,7 +72,10 @@ class Connection:
         status_line, *header_lines = (await self._reader.readuntil(b"\r\n\r\n")).decode().split("\r\n")
         headers = dict(line.split(": ", 1) for line in header_lines if line)
         content = await self._reader.readexactly(int(headers.get("content-length", "0")))
-        status = int(status_line.split()[1])
+        return int(status_line.split()[1]), content
+
+    async def post(self, path: str, payload: object) -> object:
+        status, content = await self.send(path, payload)
         if status != 200:
             raise RuntimeError(f"POST {path} -> {status}: {content[:200]!r}")
         return json.loads(content)
