@@ -11,7 +11,7 @@ A page asks for one with a marker line, ``<!-- reference: NAME [ARGUMENT] -->``:
 
 Generating them means the site cannot drift from the command line or the service. Nothing here
 touches the network. The hook also serves the repository's ``benchmarks/`` files that a page links
-(``BENCHMARKS.md``'s figures) at the same path in the site, so they need no copy under ``docs/``.
+(the results pages' plots and tables) at the same path in the site, so they need no copy under ``docs/``.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ HELP_COLUMNS = "100"
 
 
 def on_files(files: Files, config: MkDocsConfig) -> Files:
-    """Serve each ``benchmarks/`` file a page (or the included BENCHMARKS.md) links."""
-    sources = [REPOSITORY / "BENCHMARKS.md", *Path(config.docs_dir).rglob("*.md")]
+    """Serve each ``benchmarks/`` file a page links."""
+    sources = list(Path(config.docs_dir).rglob("*.md"))
     linked = {match for source in sources for match in BENCHMARK_LINK.findall(source.read_text(encoding="utf-8"))}
     for path in sorted(linked):
         if (REPOSITORY / path).is_file() and files.get_file_from_path(path) is None:
