@@ -2,7 +2,9 @@
 
 A Gaussian policy whose log standard deviation is one learned number per action dimension, or, with
 ``PolicySpec.state_dependent_std``, a second output of the actor's head; actions are sampled unbounded
-and clipped to the action box by whoever steps the environment, so log-probabilities stay exact.
+and clipped to the action box by whoever steps the environment, so log-probabilities stay exact. With
+``PolicySpec.categorical`` (a ``Discrete`` action space, MiniGrid's) the actor's head gives one logit per
+action instead, and an action is a choice among them, carried as its index.
 Workers only ever see a ``PolicySnapshot`` (plain numpy, cheap to put in Ray's object store): the
 network's layers as read from its modules, in order. They run it through ``InferencePolicy``, which
 prepares observations as in training (angles become (sin, cos) features, ``ObservationFeatures``,
@@ -56,7 +58,10 @@ class ActorCritic(nn.Module):
         hidden = list(spec.hidden_sizes)
         outputs = 2 * spec.action_dim if spec.state_dependent_std else spec.action_dim
         self.actor_mean = _mlp([spec.feature_dim, *hidden, outputs], output_gain=0.01)
+        """The Gaussian's means (and per-state log-stds), or a categorical policy's logits, near uniform at first."""
         self.critic = _mlp([spec.feature_dim, *hidden, 1], output_gain=1.0)
+        if spec.categorical:
+            return
         if spec.state_dependent_std:
             last = self.actor_mean[-1]
             assert isinstance(last, nn.Linear)
@@ -75,7 +80,7 @@ class ActorCritic(nn.Module):
     def floor_log_std(self) -> None:
         """Project a shared log-std back onto ``min_log_std`` after an optimiser step. A clamp in the
         forward pass would cut its gradient, and one pushed under the floor could never come back."""
-        if not self.spec.state_dependent_std and self.spec.min_log_std is not None:
+        if not self.spec.categorical and not self.spec.state_dependent_std and self.spec.min_log_std is not None:
             with torch.no_grad():
                 self.actor_log_std.clamp_(min=self.spec.min_log_std)
 
@@ -86,7 +91,13 @@ class ActorCritic(nn.Module):
     def evaluate(
         self, observations: torch.Tensor, actions: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Return (log-probability, entropy, value) of given actions, with gradients."""
+        """Return (log-probability, entropy, value) of given actions, with gradients; a categorical policy's
+        actions are (n, 1) indices as floats."""
+        if self.spec.categorical:
+            log_probs = torch.log_softmax(self.actor_mean(observations), dim=-1)
+            chosen = log_probs.gather(-1, actions.long()).squeeze(-1)
+            entropy = -(log_probs.exp() * log_probs).sum(-1)
+            return chosen, entropy, self.value(observations)
         mean, log_std = self.mean_and_log_std(observations)
         entropy = (0.5 + LOG_SQRT_2PI + log_std).sum(-1).expand(mean.shape[0])
         return self._log_prob(mean, log_std, actions), entropy, self.value(observations)
@@ -147,7 +158,7 @@ def capture_snapshot(network: ActorCritic, normalizer: RunningNormalizer, versio
         network.spec,
         dense_layers(network.actor_mean),
         dense_layers(network.critic),
-        None if network.spec.state_dependent_std else numpy_copy(network.actor_log_std),
+        None if network.spec.state_dependent_std or network.spec.categorical else numpy_copy(network.actor_log_std),
         normalizer.state(),
         normalizer.clip,
         version,

@@ -53,8 +53,17 @@ class PolicySpec:
     half_turn_indices: tuple[int, ...] = ()
     """Angles among ``angle_indices`` of something that looks the same turned half a turn (a box's yaw): the
     networks see (sin 2a, cos 2a), so both readings of one pose are one input."""
+    categorical: bool = False
+    """Actions are one of ``action_dim`` choices (gymnasium's ``Discrete(action_dim)``), drawn from a categorical
+    distribution over the actor head's ``action_dim`` logits; batches carry each as its index, one float per
+    step. The log-std options do not apply. False: a Gaussian over a box of ``action_dim`` dimensions."""
 
     def __post_init__(self) -> None:
+        if self.categorical and (self.state_dependent_std or self.min_log_std is not None or self.action_dim < 2):
+            raise ValueError(
+                "a categorical policy needs at least 2 actions and has no log-std "
+                f"(state_dependent_std, min_log_std), got {self}"
+            )
         if self.min_log_std is not None and not LOG_STD_BOUNDS[0] <= self.min_log_std < LOG_STD_BOUNDS[1]:
             low, high = LOG_STD_BOUNDS
             raise ValueError(f"min_log_std must be in [{low}, {high}), got {self.min_log_std}")
@@ -161,7 +170,7 @@ class PolicySnapshot:
     critic: tuple[DenseLayer, ...]
     """The value's head."""
     log_std: np.ndarray | None
-    """The shared log-std; None where the actor's head outputs it per state."""
+    """The shared log-std; None where the actor's head outputs it per state, and for a categorical policy."""
     normalizer: NormalizerState
     obs_clip: float
     version: int
@@ -218,8 +227,11 @@ class InferencePolicy:
         return _run(actor, inputs), _run(critic, inputs)[:, 0]
 
     def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim)."""
+        """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim): actions
+        (n, action_dim), or (n, 1) chosen indices as floats for a categorical policy."""
         actor, values = self._forward(observations)
+        if self.spec.categorical:
+            return (*self._choose(actor, deterministic), values)
         mean = actor[:, : self.spec.action_dim]
         noise = np.zeros_like(mean) if deterministic else self.rng.standard_normal(mean.shape, dtype=np.float32)
         if self.spec.state_dependent_std:
@@ -230,6 +242,20 @@ class InferencePolicy:
             std, offset = self._std, self._log_density_offset
         log_probs = (-0.5 * (noise * noise).sum(axis=-1) - offset).astype(np.float32)
         return mean + std * noise, log_probs, values
+
+    def _choose(self, logits: np.ndarray, deterministic: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Indices drawn from the categorical distribution of each row of logits (the likeliest one when
+        ``deterministic``), as (n, 1) floats, and their log-probabilities (n,): the inverse of each row's
+        cumulative distribution at one uniform number, so one draw per row whatever the number of choices."""
+        shifted = logits.astype(np.float64) - logits.max(axis=-1, keepdims=True)
+        log_probs = shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+        if deterministic:
+            chosen = log_probs.argmax(axis=-1)
+        else:
+            below = np.cumsum(np.exp(log_probs), axis=-1) < self.rng.random((len(logits), 1))
+            chosen = np.minimum(below.sum(axis=-1), logits.shape[-1] - 1)
+        picked = np.take_along_axis(log_probs, chosen[:, None], axis=-1)[:, 0]
+        return chosen[:, None].astype(np.float32), picked.astype(np.float32)
 
     def value(self, observations: np.ndarray) -> np.ndarray:
         return self._forward(observations)[1]

@@ -22,6 +22,11 @@ class EpisodeStats:
     success: bool
     length: int
     task_id: str | None = None
+    score: float | None = None
+    """PLR's positive value loss: the mean over the episode's steps of max(GAE advantage, 0), from the values
+    the policy predicted as it acted (None where the sampler computes none, as in evaluations)."""
+    score_only: bool = False
+    """The teacher issued the task for scoring only (robust PLR): its steps stay out of the policy update."""
 
 
 @dataclass(frozen=True)
@@ -32,7 +37,9 @@ class TrajectoryBatch:
     and then folds them into its running statistics. Episodes cross batch boundaries, so two arrays
     carry what bootstrapping needs: ``final_values`` holds V(last observation) at steps where an
     episode was truncated (zero elsewhere), and ``last_values`` holds V(next observation) for every
-    environment after the final step.
+    environment after the final step. ``score_only`` marks the steps of episodes whose task was issued for
+    scoring only: they are played and reported, and their advantages computed, but the update leaves
+    them out (None: no such step).
     """
 
     observations: np.ndarray
@@ -46,6 +53,7 @@ class TrajectoryBatch:
     last_values: np.ndarray
     policy_version: int
     episodes: list[EpisodeStats] = field(default_factory=list)
+    score_only: np.ndarray | None = None
 
     @property
     def num_steps(self) -> int:
