@@ -182,6 +182,9 @@ class TeacherClient:
         self._fatal: TeacherRequestError | None = None
         self.delivered = 0
         """Results the service has acknowledged (accepted or already known)."""
+        self.already_stored = 0
+        """Acknowledged results the service already held: resends after an answer that was lost (the
+        service stored the batch, then died or the connection dropped before the answer came)."""
         self.rejected = 0
         """Results the service refused as invalid; dropped (see module doc)."""
         self.offline_results = 0
@@ -346,7 +349,7 @@ class TeacherClient:
             if not batch:
                 continue
             try:
-                ResultAck.model_validate(
+                ack = ResultAck.model_validate(
                     self._send("POST", f"{self._path}/results", {"results": [item.model_dump() for item in batch]})
                 )
             except _Transient as error:
@@ -372,6 +375,7 @@ class TeacherClient:
             attempt = 0
             self._fatal = None
             self.delivered += len(batch)
+            self.already_stored += ack.duplicates
             self._settle(batch, keep=[])
             self._end_drop_burst()
             self._let_results_gather()

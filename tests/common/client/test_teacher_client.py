@@ -8,11 +8,13 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sqlite3
 import threading
 import time
 from collections.abc import Iterator
 
 import httpx
+import numpy as np
 import pytest
 
 from common.client.task_space import Parameter, TaskSpace
@@ -253,3 +255,42 @@ def test_the_service_decides_which_teacher_kinds_exist(service):
         assert unknown.value.status == 422 and "alp-gmm" in str(unknown.value)
         with pytest.raises(ValueError, match="teacher"):
             client.register("Not A Kind!", KUKA_TASK_SPACE)
+
+
+def test_a_service_killed_between_storing_results_and_answering_keeps_each_result_once(tmp_path):
+    """Results flow without pause while the service is SIGKILLed and restarted, until a kill lands
+    after a batch was stored but before its answer reached the client (the client then resends it
+    and the service says it already had it): every reported result is stored exactly once."""
+    service = ServiceProcess(tmp_path / "teacher.db")
+    service.start()
+    stop, reported = threading.Event(), []
+    client = _client(service, "killed-mid-answer", token=None, prefetch=64, report_interval=0.0, task_timeout=0.3)
+    client.register("random", KUKA_TASK_SPACE, seed=2)
+
+    def play() -> None:
+        while not stop.is_set():
+            assignment = client.next_task()
+            if not assignment.offline:
+                client.report(assignment, reward=1.0)
+                reported.append(assignment.task_id)
+
+    player = threading.Thread(target=play)
+    player.start()
+    rng = np.random.default_rng(0)
+    try:
+        for kills in range(1, 41):
+            time.sleep(float(rng.uniform(0.05, 0.4)))
+            service.kill()
+            service.start()
+            if kills >= 3 and client.already_stored:
+                break
+    finally:
+        stop.set()
+        player.join()
+    assert client.flush(timeout=60)
+    client.close()
+    service.stop()
+    assert client.already_stored > 0, f"no kill in {kills} landed between a stored batch and its answer"
+    with sqlite3.connect(tmp_path / "teacher.db") as connection:
+        stored = connection.execute("SELECT COUNT(*), COUNT(DISTINCT task_index) FROM results").fetchone()
+    assert stored == (len(reported), len(set(reported))) and len(reported) == len(set(reported))
