@@ -1,4 +1,5 @@
-"""The rollout actor: KUKA environments, a teacher client and the sampling loop in one Ray process.
+"""The rollout actor: environments (KUKA's, or a MiniGrid level family's), a teacher client and the
+sampling loop in one Ray process.
 
 Every episode's task comes from the teacher service and its result goes straight back there; the
 learner only ever receives fixed-size batches. Weights arrive as a ``PolicySnapshot``; passing a
@@ -11,17 +12,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
+import gymnasium as gym
+import numpy as np
 import ray
 from pydantic import SecretStr
 
 from common.client.task_space import Task
 from common.client.teacher_client import Assignment, TeacherClient
 from common.kuka import ENV_ID
-from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.kuka.env import make_kuka_env
+from common.levels import is_level_env
 from common.policy.inference import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
-from rollout_worker.sampler import Sampler, run_episodes
+from rollout_worker.sampler import Sampler, ScoreDiscount, run_episodes
 
 TASK_TIMEOUT_S = 2.0
 """How long a worker waits for the teacher before playing an offline episode: short, because
@@ -40,7 +45,20 @@ class WorkerSettings:
     teacher_token: SecretStr | None = None
     """Held as a ``SecretStr`` so that no repr or log line of the settings shows it."""
     env_id: str = ENV_ID
-    """The registered environment the workers step (``common.kuka.ENV_IDS``)."""
+    """The environment the workers step: a KUKA family (``common.kuka.ENV_IDS``) or a level family
+    (``common.levels.LEVEL_ENV_IDS``)."""
+    score_discount: ScoreDiscount | None = None
+    """The learner's discount and GAE lambda: each episode's result carries its positive value loss as its
+    score (None: results go without a score)."""
+
+
+def make_env(env_id: str, max_steps: int) -> gym.Env[np.ndarray, Any]:
+    """A bare environment of a KUKA family, or a level family's (its level the reset seed)."""
+    if is_level_env(env_id):
+        from common.levels.env import make_level_env  # here: minigrid loads only for a level family
+
+        return make_level_env(env_id, max_steps=max_steps)
+    return make_kuka_env(env_id, max_steps=max_steps)
 
 
 class _TeacherTasks:
@@ -49,13 +67,16 @@ class _TeacherTasks:
     def __init__(self, client: TeacherClient) -> None:
         self.client = client
 
-    def next_task(self) -> tuple[str | None, Task]:
-        assignment = self.client.next_task()
-        return assignment.task_id, assignment.params
+    def next_task(self) -> Assignment:
+        return self.client.next_task()
 
     def report(self, episode: EpisodeStats) -> None:
         self.client.report(
-            Assignment(episode.task_id, episode.task), episode.reward, success=episode.success, length=episode.length
+            Assignment(episode.task_id, episode.task),
+            episode.reward,
+            success=episode.success,
+            length=episode.length,
+            score=episode.score,
         )
 
 
@@ -73,9 +94,9 @@ class RolloutWorker:
             prefetch=2 * settings.num_envs,
             task_timeout=TASK_TIMEOUT_S,
         )
-        envs = [make_kuka_env(settings.env_id, max_steps=settings.max_episode_steps) for _ in range(settings.num_envs)]
-        self.sampler = Sampler(envs, _TeacherTasks(self.client), seed)
-        self.evaluation_env: KukaGraspEnv | None = None
+        envs = [make_env(settings.env_id, settings.max_episode_steps) for _ in range(settings.num_envs)]
+        self.sampler = Sampler(envs, _TeacherTasks(self.client), seed, settings.score_discount)
+        self.evaluation_env: gym.Env[np.ndarray, Any] | None = None
         self.policy: InferencePolicy | None = None
 
     def _load(self, snapshot: PolicySnapshot) -> InferencePolicy:
@@ -89,10 +110,13 @@ class RolloutWorker:
         return self.sampler.sample(self._load(snapshot), self.settings.rollout_length)
 
     def evaluate(self, snapshot: PolicySnapshot, task: Task, seeds: Sequence[int]) -> list[EpisodeStats]:
-        """Deterministic episodes on environments of their own, so training episodes are not disturbed."""
+        """Episodes on an environment of their own, so training episodes are not disturbed: deterministic on a
+        KUKA family; a level family's categorical policy samples its actions (its likeliest action alone
+        can turn on the spot for ever)."""
         if self.evaluation_env is None:
-            self.evaluation_env = make_kuka_env(self.settings.env_id, max_steps=self.settings.max_episode_steps)
-        return run_episodes(self.evaluation_env, self._load(snapshot), task, seeds)
+            self.evaluation_env = make_env(self.settings.env_id, self.settings.max_episode_steps)
+        deterministic = not is_level_env(self.settings.env_id)
+        return run_episodes(self.evaluation_env, self._load(snapshot), task, seeds, deterministic=deterministic)
 
     def close(self) -> None:
         """Deliver every buffered episode result to the teacher."""

@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from common.client.task_space import Task
+from common.client.teacher_client import Assignment
 from common.policy.trajectory import EpisodeStats
 
 OBS_SCALE = np.array([40.0, 0.05], dtype=np.float32)
@@ -53,9 +53,9 @@ class RecordingTasks:
         self.handed_out = 0
         self.reported: list[EpisodeStats] = []
 
-    def next_task(self) -> tuple[str, Task]:
+    def next_task(self) -> Assignment:
         self.handed_out += 1
-        return f"reach:{self.handed_out}", {}
+        return Assignment(f"reach:{self.handed_out}", {})
 
     def report(self, episode: EpisodeStats) -> None:
         self.reported.append(episode)

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from common.client.task_space import Task
+from common.client.teacher_client import Assignment
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
 from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySpec, capture_snapshot
@@ -18,10 +19,10 @@ class RandomTasks:
         self.handed_out: list[Task] = []
         self.reported: list[EpisodeStats] = []
 
-    def next_task(self) -> tuple[str, Task]:
+    def next_task(self) -> Assignment:
         task = KUKA_TASK_SPACE.from_array(self.rng.uniform(KUKA_TASK_SPACE.low, KUKA_TASK_SPACE.high))
         self.handed_out.append(task)
-        return f"random:{len(self.handed_out) - 1}", task
+        return Assignment(f"random:{len(self.handed_out) - 1}", task)
 
     def report(self, episode: EpisodeStats) -> None:
         self.reported.append(episode)
