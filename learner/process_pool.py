@@ -1,10 +1,13 @@
-"""A process pool that Ctrl-C stops cleanly: for commands that play many episodes in
-worker processes (``evaluate``, ``bakeoff``'s final evaluations, the benchmark scripts)."""
+"""A process pool that Ctrl-C stops cleanly and a killed parent does not outlive: for commands that
+play many episodes in worker processes (``evaluate``, ``bakeoff``'s final evaluations, the
+benchmark scripts)."""
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -32,10 +35,40 @@ def _children_ignore_ctrl_c() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
+PARENT_CHECK_S = 1.0
+"""How often a worker looks for its parent: how long it outlives a parent killed with SIGKILL."""
+
+
+def _leave_with_parent(parent: int) -> None:
+    """Exit as soon as the parent is gone. A worker of a parent killed with SIGKILL would otherwise
+    wait on its work queue for ever: it holds that queue's write end itself, so no end-of-file comes."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_CHECK_S)
+    os._exit(1)
+
+
+def _start_worker(parent: int, initializer: Callable[..., object] | None, initargs: tuple[Any, ...]) -> None:
+    threading.Thread(target=_leave_with_parent, args=(parent,), name="parent-watch", daemon=True).start()
+    if initializer is not None:
+        initializer(*initargs)
+
+
 class StoppablePool(ProcessPoolExecutor):
-    """A ``ProcessPoolExecutor`` whose workers leave Ctrl-C to the parent, and whose ``with`` block
-    cancels the queued work on the way out: stopped (Ctrl-C) or failed, only the work already
-    running plays out."""
+    """A ``ProcessPoolExecutor`` whose workers leave Ctrl-C to the parent and exit when the parent
+    dies however it dies, and whose ``with`` block cancels the queued work on the way out: stopped
+    (Ctrl-C) or failed, only the work already running plays out."""
+
+    def __init__(
+        self,
+        max_workers: int | None = None,
+        *,
+        initializer: Callable[..., object] | None = None,
+        initargs: tuple[Any, ...] = (),
+        **options: Any,
+    ) -> None:
+        super().__init__(
+            max_workers, initializer=_start_worker, initargs=(os.getpid(), initializer, initargs), **options
+        )
 
     def submit(self, fn: Callable[..., Result], /, *args: Any, **kwargs: Any) -> Future[Result]:
         with _children_ignore_ctrl_c():  # the pool starts its processes as work is submitted

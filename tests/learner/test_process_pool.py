@@ -1,0 +1,54 @@
+"""The evaluation pool's workers do not outlive a parent killed with SIGKILL."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PARENT = """
+import os, time
+from multiprocessing import get_context
+from learner.process_pool import StoppablePool
+
+def pid_then_wait(_: int) -> int:
+    time.sleep(0.2)
+    return os.getpid()
+
+if __name__ == "__main__":
+    with StoppablePool(2, mp_context=get_context("spawn")) as pool:
+        pids = set(pool.map(pid_then_wait, range(8)))
+        print(" ".join(map(str, sorted(pids))), flush=True)
+        time.sleep(600)  # killed here, its workers idle on their work queue
+"""
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    status = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    return status != "Z"
+
+
+def test_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> None:
+    script = tmp_path / "parent.py"  # a file, so spawned workers can import its function
+    script.write_text(PARENT)
+    environment = {**os.environ, "PYTHONPATH": str(Path.cwd())}
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=environment)
+    assert parent.stdout is not None
+    workers = [int(pid) for pid in parent.stdout.readline().split()]
+    assert workers and all(alive(pid) for pid in workers)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 10.0
+    while any(alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    orphans = [pid for pid in workers if alive(pid)]
+    for pid in orphans:
+        os.kill(pid, signal.SIGKILL)
+    assert not orphans, f"workers {orphans} outlived their killed parent"
