@@ -118,6 +118,11 @@ class CurriculumRegistry:
         """Why no fits run any more, if the fit processes kept dying."""
         return self._fits.stopped
 
+    @property
+    def writes_failing(self) -> str | None:
+        """Why the database refuses writes (a full disk, a read-only file), while it does."""
+        return self._store.writes_failing
+
     def __len__(self) -> int:
         return len(self._curricula)
 

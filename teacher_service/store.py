@@ -331,6 +331,8 @@ class Store:
         self._migrate()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pending: list[_Write] = []
+        self.writes_failing: str | None = None
+        """Why the last commit failed (a full disk, a read-only file); None once one succeeds."""
 
     def _migrate(self) -> None:
         """Bring the database up to ``SCHEMA_VERSION``, one version per transaction."""
@@ -603,8 +605,10 @@ class Store:
                     write.error = error
                 self._db.execute("RELEASE one_write")
             self._db.execute("COMMIT")
+            self.writes_failing = None
         except BaseException as error:
             log.exception("commit of %d writes failed", len(group))
+            self.writes_failing = _reason(error)
             self._roll_back()
             for write in group:
                 write.error = write.error or error

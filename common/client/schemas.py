@@ -198,8 +198,16 @@ class CurriculumState(BaseModel):
 
 
 class Health(BaseModel):
-    status: Literal["ok"] = "ok"
+    status: Literal["ok", "degraded"] = Field(
+        default="ok", description="`degraded` while the database refuses writes (see `writes_failing`)."
+    )
     curricula: int
+    writes_failing: str | None = Field(
+        default=None,
+        description="Why the database refuses writes (a full disk, a read-only file) while it does: writes "
+        "answer 503 with the same reason, reads and the tasks already issued still work, and the service "
+        "recovers by itself at the first write that succeeds.",
+    )
     fits_stopped: str | None = Field(
         default=None,
         description="Why no teacher model fits run any more (tasks are still served from the last models).",

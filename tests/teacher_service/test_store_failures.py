@@ -156,11 +156,14 @@ def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is
     refused_results = http.post("/curricula/full/results", json=_results(acknowledged[20:]))
     _refused(refused_results, "database or disk is full")
 
-    assert http.get(f"{service.url}/healthz").status_code == 200
+    health = http.get(f"{service.url}/healthz")
+    assert health.status_code == 200, "alive: a restart would not make room"
+    assert (health.json()["status"], health.json()["writes_failing"]) == ("degraded", "database or disk is full")
     assert http.get("/curricula/full").json()["counters"]["results_received"] == 20
 
     service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
     assert len(_draw(http, "full", 1024).json()["tasks"]) == 1024
+    assert http.get(f"{service.url}/healthz").json()["status"] == "ok", "recovered by itself at the next write"
     retried = http.post("/curricula/full/results", json=_results(acknowledged[20:])).json()
     assert retried == {"accepted": 980, "duplicates": 0, "expired": 0}, (
         "the refused results were not kept as outstanding"

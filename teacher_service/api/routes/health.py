@@ -13,7 +13,13 @@ router = APIRouter(tags=["service"])
 
 @router.get("/healthz")
 async def healthz(registry: RegistryDep) -> Health:
-    return Health(curricula=len(registry), fits_stopped=registry.fits_stopped)
+    failing = registry.writes_failing
+    return Health(
+        status="ok" if failing is None else "degraded",
+        curricula=len(registry),
+        writes_failing=failing,
+        fits_stopped=registry.fits_stopped,
+    )
 
 
 @router.get(
