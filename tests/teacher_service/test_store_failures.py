@@ -11,6 +11,7 @@ import asyncio
 import logging
 import sqlite3
 import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -244,3 +245,33 @@ def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_r
         assert client.flush(timeout=30)
         assert client.delivered == 1000
     assert _stored_results(service.store.path, "client") == {a.task_id for a in assignments}
+
+
+def test_a_fit_whose_record_meets_a_full_disk_is_run_again_by_the_restart(
+    tmp_path: Path, kuka_space: list[dict[str, Any]]
+) -> None:
+    """The disk fills while a fit runs: its model is installed but its record cannot be stored. Once
+    there is room, a restart runs that fit again from the stored results, and is the same teacher."""
+    db = tmp_path / "teacher.db"
+    body = {"teacher": "alp-gmm", "space": kuka_space, "seed": 0, "params": {"fit_rate": 200}}
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http:
+        assert http.put("/curricula/fitting", json=body).status_code == 201
+        tasks = _draw(http, "fitting", 200).json()["tasks"]
+        assert http.post("/curricula/fitting/results", json=_results(tasks)).json()["accepted"] == 200  # fit 0 due
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))
+        while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
+            time.sleep(0.05)
+        with sqlite3.connect(db) as connection:
+            assert connection.execute("SELECT COUNT(*) FROM fits").fetchone() == (0,), "the fit's record was lost"
+        live = http.get("/curricula/fitting/state").json()
+        assert [fit["index"] for fit in live["fits"]] == [0] and live["fits"][0]["error"] is None
+        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+
+    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http:
+        while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
+            time.sleep(0.05)
+        restarted = http.get("/curricula/fitting/state").json()
+        assert restarted["teacher"] == live["teacher"], "the restart ran the lost fit again, to the same model"
+        assert restarted["fits"][0]["replayed"] is True
+        assert http.get(f"{service.url}/healthz").json()["status"] == "ok"
