@@ -12,19 +12,7 @@ set -euo pipefail
 url="${1:-http://127.0.0.1:8000}"
 curriculum="${2:-shell-levels}"
 api="$url/api/v1/curricula/$curriculum"
-auth=()
-if [[ -n "${KC_TEACHER_TOKEN:-}" ]]; then
-    auth=(-H "Authorization: Bearer $KC_TEACHER_TOKEN")
-fi
-
-call() {
-    local body
-    if ! body=$(curl --silent --show-error --fail-with-body "${auth[@]}" -H "Content-Type: application/json" "$@"); then
-        echo "$body" >&2
-        return 1
-    fi
-    echo "$body"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/http_call.sh"  # call: one request, with the token if set
 
 echo "1. register: robust PLR over one integer parameter, the level seed 0 to 199"
 call -X PUT "$api" -d '{
