@@ -61,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
     add_override_flags(run, "for this run")
-    add_training_flags(run, defaults_given=False)
+    add_training_flags(run, defaults_given=False, level_families=True)
     where = parser.add_argument_group("where")
     where.add_argument("--run-dir", type=Path, help="run directory (default runs/<teacher>-<timestamp>)")
     resume = where.add_mutually_exclusive_group()
@@ -88,6 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 _RUN_SETTINGS = (
     "teacher",
     "env",
+    "levels",
     "total_steps",
     "workers",
     "envs_per_worker",

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 from common.kuka import ENV_ID, ENV_IDS
+from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS, MAX_LEVELS, is_level_env
 from common.policy.noise import LOG_STD_BOUNDS
 from teacher_service.teachers import TEACHER_KINDS
 
@@ -127,6 +128,8 @@ _OPTIONAL_FLOATS = ("target_kl", "min_log_std")
 TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_KINDS)
 """Every teacher kind the service knows, in its registry's order (``teacher_service.teachers``)."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
+TRAIN_ENV_IDS: tuple[str, ...] = (*ENV_IDS, *LEVEL_ENV_IDS)
+"""What ``train --env`` takes: the KUKA families, then the MiniGrid level families (``common.levels``)."""
 
 KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
     "alp-gmm": {"reward_range": [-5.0, 10.0], "target_task_ratio": 0.2},
@@ -157,7 +160,9 @@ class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
     """Curriculum teacher, one of ``TEACHERS``: manual is the book's lesson plan, fixed the hardest task alone."""
     env: str = ENV_ID
-    """Task family: KukaGrasp-v0 (the book's), KukaGraspHard-v0 (ten parameters) or -v1 (v0, hardest margin 2°)."""
+    """Task family: KukaGrasp-v0, KukaGraspHard-v0 or -v1, or a MiniGrid level family (levels = reset seeds)."""
+    levels: int = DEFAULT_LEVELS
+    """A level family's training set: the reset seeds 0 to levels - 1 (the KUKA families ignore it)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
     workers: int = 2
@@ -183,7 +188,8 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         _require(self.teacher in TEACHERS, f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
-        _require(self.env in ENV_IDS, f"env must be one of {', '.join(ENV_IDS)}, got {self.env!r}")
+        _require(self.env in TRAIN_ENV_IDS, f"env must be one of {', '.join(TRAIN_ENV_IDS)}, got {self.env!r}")
+        _require(1 <= self.levels <= MAX_LEVELS, f"levels must be between 1 and {MAX_LEVELS:,}, got {self.levels}")
         _require(self.total_steps >= 1, "total_steps must be at least 1")
         _require(self.workers >= 1, "workers must be at least 1")
         _require(self.envs_per_worker >= 1, "envs_per_worker must be at least 1")
@@ -195,7 +201,10 @@ class TrainConfig:
 
     @property
     def teacher_params(self) -> dict[str, Any]:
-        """What the curriculum is registered with (``kuka_teacher_params``)."""
+        """What the curriculum is registered with: ``kuka_teacher_params`` on a KUKA family; on a level
+        family the overrides alone, on the teacher's own defaults."""
+        if is_level_env(self.env):
+            return dict(self.teacher_overrides)
         return kuka_teacher_params(self.teacher, self.teacher_overrides)
 
     @property

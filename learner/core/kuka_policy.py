@@ -1,9 +1,10 @@
 """The KUKA policy: its network's shape, one definition for training and evaluation, and the policy
-a checkpoint holds."""
+a checkpoint holds; ``policy_spec_for`` gives a level family's (MiniGrid's) too."""
 
 from __future__ import annotations
 
 from common.kuka.env import BLOCK_XY_IN_GRIPPER, BLOCK_YAW_INDEX, GRIPPER_EULER_INDICES, KukaGraspEnv
+from common.levels import is_level_env
 from common.policy.actor_critic import PolicySnapshot, PolicySpec
 from common.policy.inference import WorldOffset
 from learner.core.checkpoint import Checkpoint
@@ -32,8 +33,34 @@ def kuka_policy_spec(ppo: PPOConfig) -> PolicySpec:
         probe.close()
 
 
+def level_policy_spec(env_id: str, ppo: PPOConfig) -> PolicySpec:
+    """A level family's policy: a categorical head over its ``Discrete`` actions, on its flattened view (see
+    ``common.levels.env``); the KUKA options of ``PPOConfig`` (angles, the block's offset, the log-std's)
+    do not apply."""
+    from common.levels.env import action_count, make_level_env  # here: minigrid loads only for a level family
+
+    probe = make_level_env(env_id)
+    try:
+        observation_shape = probe.observation_space.shape
+        assert observation_shape is not None
+        return PolicySpec(
+            obs_dim=int(observation_shape[0]),
+            action_dim=action_count(probe),
+            hidden_sizes=ppo.hidden_sizes,
+            categorical=True,
+        )
+    finally:
+        probe.close()  # type: ignore[no-untyped-call]  # gymnasium's Wrapper.close is unannotated
+
+
+def policy_spec_for(env_id: str, ppo: PPOConfig) -> PolicySpec:
+    """The network's shape for a run on ``env_id``: a KUKA family's or a level family's."""
+    return level_policy_spec(env_id, ppo) if is_level_env(env_id) else kuka_policy_spec(ppo)
+
+
 def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
     """The policy a checkpoint holds, in the form the rollout workers act with."""
-    learner = PPOLearner(kuka_policy_spec(checkpoint.config.ppo), checkpoint.config.ppo, checkpoint.config.seed)
+    spec = policy_spec_for(checkpoint.config.env, checkpoint.config.ppo)
+    learner = PPOLearner(spec, checkpoint.config.ppo, checkpoint.config.seed)
     learner.load_state_dict(checkpoint.learner)
     return learner.snapshot()

@@ -125,6 +125,9 @@ class PPOLearner:
         updates older: the ratio is taken against the log-probabilities of the policy that acted.
 
         ``progress`` in [0, 1] is the share of the step budget already spent (learning-rate annealing).
+        Steps the batches mark ``score_only`` are left out, normaliser statistics included (their
+        advantages are computed with the rest: no advantage chain crosses an episode's end); where every
+        step is, the policy stays as it was and the losses read NaN.
         """
         accepted = range(self.version - max_policy_lag, self.version + 1)
         stale = sorted({batch.policy_version for batch in batches if batch.policy_version not in accepted})
@@ -140,18 +143,27 @@ class PPOLearner:
 
         gae = [compute_advantages(batch, cfg.gamma, cfg.gae_lambda) for batch in batches]
         raw_observations = np.concatenate([b.observations.reshape(-1, b.observations.shape[-1]) for b in batches])
-        features = self.features(raw_observations)
-        observations = torch.from_numpy(self.normalizer.normalize(features))
-        actions = torch.from_numpy(np.concatenate([b.actions.reshape(-1, b.actions.shape[-1]) for b in batches]))
+        actions_array = np.concatenate([b.actions.reshape(-1, b.actions.shape[-1]) for b in batches])
         old_log_probs = _flat(b.log_probs for b in batches)
         old_values = _flat(b.values for b in batches)
         advantages = _flat(adv for adv, _ in gae)
         returns = _flat(ret for _, ret in gae)
+        kept = _trained_steps(batches)
+        if kept is not None:  # robust PLR: a score-only episode's steps stay out of the update, normaliser included
+            raw_observations, actions_array = raw_observations[kept], actions_array[kept]
+            index = torch.from_numpy(kept)
+            old_log_probs, old_values = old_log_probs[index], old_values[index]
+            advantages, returns = advantages[index], returns[index]
+        features = self.features(raw_observations)
+        observations = torch.from_numpy(self.normalizer.normalize(features))
+        actions = torch.from_numpy(actions_array)
 
         size = observations.shape[0]
         stats: dict[str, list[torch.Tensor]] = {
             name: [] for name in ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
         }
+        if size == 0:  # every step score-only (robust PLR exploring new levels): the policy stays as it was
+            return {**{name: float("nan") for name in stats}, "learning_rate": learning_rate}
         for _ in range(cfg.update_epochs):
             order = torch.randperm(size, generator=self.shuffle)
             for start in range(0, size, cfg.minibatch_size):
@@ -183,6 +195,8 @@ class PPOLearner:
         metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
         metrics["learning_rate"] = learning_rate
         metrics["explained_variance"] = _explained_variance(old_values.numpy(), returns.numpy())
+        if self.network.spec.categorical:  # no std; its entropy is the spread to watch
+            return metrics
         with torch.no_grad():  # a shared log-std needs no pass over the batch; a per-state one is averaged over it
             if self.network.spec.state_dependent_std:
                 log_std = self.network.mean_and_log_std(observations)[1]
@@ -208,6 +222,20 @@ class PPOLearner:
         self.normalizer.load_state(NormalizerState(**restored))  # type: ignore[arg-type]  # count: a 0-d array, used as a float
         self.shuffle.set_state(state["shuffle_rng"])
         self.version = int(state["version"])
+
+
+def _trained_steps(batches: Sequence[TrajectoryBatch]) -> np.ndarray | None:
+    """The flat indices of the steps to update on, in order, or None for all of them (no score-only step)."""
+    marks = [batch.score_only for batch in batches]
+    if not any(mark is not None and mark.any() for mark in marks):
+        return None
+    flat = np.concatenate(
+        [
+            np.zeros(b.rewards.size, dtype=bool) if m is None else m.reshape(-1)
+            for b, m in zip(batches, marks, strict=True)
+        ]
+    )
+    return np.flatnonzero(~flat)
 
 
 def _flat(arrays: Any) -> torch.Tensor:

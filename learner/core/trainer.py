@@ -35,12 +35,13 @@ from common.policy.actor_critic import PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from learner.core.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.core.config import TrainConfig
-from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.kuka_policy import policy_spec_for
 from learner.core.metrics import MetricsLog
 from learner.core.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
 from learner.core.ppo import PPOLearner
 from rollout_worker.actor import WorkerSettings
 from rollout_worker.pool import InFlight, WorkerPool
+from rollout_worker.sampler import ScoreDiscount
 
 RECENT_EPISODES = 100
 """Window of the running reward and success rate shown while training."""
@@ -78,7 +79,7 @@ class Trainer:
         self.curriculum = curriculum
         self.teacher_token = teacher_token
         self.actor_name_prefix = actor_name_prefix
-        self.learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, config.seed)
+        self.learner = PPOLearner(policy_spec_for(config.env, config.ppo), config.ppo, config.seed)
         self.counters = Counters()
         if resume_from is not None:
             self.learner.load_state_dict(resume_from.learner)
@@ -104,6 +105,7 @@ class Trainer:
             max_episode_steps=self.config.max_episode_steps,
             teacher_token=self.teacher_token,
             env_id=self.config.env,
+            score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
         )
         # Resumed runs draw fresh environment seeds instead of replaying the first run's.
         pool_seed = int(np.random.SeedSequence([self.config.seed, self.counters.iteration]).generate_state(1)[0])
@@ -220,6 +222,7 @@ class _IterationLoop:
             "iteration": float(counters.iteration),
             "train/episodes": float(len(episodes)),
             "train/offline_episodes": float(offline),
+            "train/score_only_episodes": float(sum(episode.score_only for episode in episodes)),
             "train/episode_reward": _mean(e.reward for e in episodes),
             "train/success_rate": _mean(e.success for e in episodes),
             "train/episode_length": _mean(e.length for e in episodes),
@@ -230,7 +233,7 @@ class _IterationLoop:
         if self.evaluation is not None:
             self._collect_evaluation()  # still running: one at a time, in order
         episodes = self.pool.start_evaluation(
-            snapshot_ref, evaluation_task(self.config.env), evaluation_seeds(self.config.eval_episodes)
+            snapshot_ref, evaluation_task(self.config.env), evaluation_seeds(self.config.eval_episodes, self.config.env)
         )
         self.evaluation = _Evaluation(episodes, self.held[-1][1], time.perf_counter())
 

@@ -1,13 +1,14 @@
 """The sampler's KUKA batches are bit for bit those it made before it learned discrete actions, scores and
 score-only episodes (issue 58): every array of two batches from KUKA environments, with a fixed policy and
 fixed tasks, hashes to the digest recorded then (on the project's x86-64 machines, with the locked numpy
-and pybullet). Scores are off: the digest covers the batches, which scoring only reads."""
+and pybullet), with episodes scored or not: scoring only reads the batches."""
 
 from __future__ import annotations
 
 import hashlib
 
 import numpy as np
+import pytest
 import torch
 
 from common.client.teacher_client import Assignment
@@ -15,7 +16,7 @@ from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
 from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySpec, capture_snapshot
 from common.policy.normalizer import RunningNormalizer
-from rollout_worker.sampler import Sampler
+from rollout_worker.sampler import Sampler, ScoreDiscount
 
 RECORDED_DIGEST = "bde78193b75585edbb555ebf0030164d5ac9a81cd5ee9860242f928518320284"
 ARRAYS = ("observations", "actions", "log_probs", "values", "rewards", "terminated", "truncated", "final_values")
@@ -34,7 +35,7 @@ class FixedTasks:
         pass
 
 
-def sampled_digest() -> str:
+def sampled_digest(score_discount: ScoreDiscount | None) -> str:
     torch.manual_seed(0)
     network = ActorCritic(PolicySpec(obs_dim=9, action_dim=3, hidden_sizes=(16, 16), angle_indices=(3, 4, 5, 8)))
     with torch.no_grad():
@@ -43,7 +44,7 @@ def sampled_digest() -> str:
     policy = InferencePolicy(capture_snapshot(network, RunningNormalizer(13), version=1), seed=4)
     envs = [KukaGraspEnv(max_steps=25) for _ in range(2)]
     try:
-        sampler = Sampler(envs, FixedTasks(), seed=9)
+        sampler = Sampler(envs, FixedTasks(), seed=9, score_discount=score_discount)
         digest = hashlib.sha256()
         for _ in range(2):
             batch = sampler.sample(policy, 20)
@@ -58,5 +59,6 @@ def sampled_digest() -> str:
     return digest.hexdigest()
 
 
-def test_kuka_batches_are_bit_for_bit_as_recorded() -> None:
-    assert sampled_digest() == RECORDED_DIGEST
+@pytest.mark.parametrize("score_discount", [None, ScoreDiscount(0.999, 0.99)], ids=["unscored", "scored"])
+def test_kuka_batches_are_bit_for_bit_as_recorded(score_discount: ScoreDiscount | None) -> None:
+    assert sampled_digest(score_discount) == RECORDED_DIGEST
