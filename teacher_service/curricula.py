@@ -354,6 +354,11 @@ class Curriculum:
         """Why no fits run any more, if the fit processes kept dying."""
         return self._fits.stopped
 
+    @property
+    def writes_failing(self) -> str | None:
+        """Why the database refuses writes, while it does (``Store.writes_failing``)."""
+        return self._store.writes_failing
+
     def adopt_replay(self, replayed: Replayed) -> None:
         """Take on what a start-up replay rebuilt (the teacher it rebuilt in place is this
         curriculum's); before the service starts. A start that replayed anything stores a snapshot,

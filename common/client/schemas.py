@@ -109,6 +109,11 @@ class CurriculumCounters(BaseModel):
         default=None,
         description="Why this service runs no fits any more (its fit processes kept dying); null while fits run.",
     )
+    writes_failing: str | None = Field(
+        default=None,
+        description="Why this service's database refuses writes (a full disk), while it does: new tasks and "
+        "results are answered 503 until the first write succeeds; null while writes work.",
+    )
 
 
 class CurriculumInfo(BaseModel):

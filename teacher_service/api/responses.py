@@ -24,6 +24,7 @@ def curriculum_info(curriculum: Curriculum) -> CurriculumInfo:
             fits_pending=curriculum.fits_pending,
             last_fit_at=curriculum.last_fit_at,
             fits_stopped=curriculum.fits_stopped,
+            writes_failing=curriculum.writes_failing,
         ),
     )
 

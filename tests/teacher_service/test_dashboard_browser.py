@@ -17,6 +17,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
+from in_process_service import InProcessService
 from playwright.sync_api import Browser, Page, sync_playwright
 
 from bench.dashboard_screenshot import DEBIAN_CHROMIUM, launch_chromium
@@ -293,6 +294,29 @@ def test_fits_that_were_abandoned_or_superseded_are_listed_with_the_reason(brows
                 assert row.locator("td").nth(3).get_attribute("class") == "failed"
         assert page.inner_text("#fits-note").endswith("3 not installed")
         assert page.locator("#fits-stopped").is_hidden()
+        assert problems == PageProblems()
+        page.close()
+
+
+def test_a_full_disk_shows_a_banner_with_the_reason_until_writes_work_again(browser: Browser, tmp_path: Path) -> None:
+    with (
+        InProcessService(tmp_path / "teacher.db") as service,
+        httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula", timeout=10) as client,
+    ):
+        assert client.put("/full", json={"teacher": "random", "space": SPACE, "seed": 0}).status_code == 201
+        page, problems = open_page(browser, f"{service.url}/curricula/full", service)
+        banner = page.locator("#writes-failing")
+        page.wait_for_function("() => document.getElementById('kind').textContent === 'random'")
+        assert banner.is_hidden()
+
+        service.fill_disk()
+        assert client.post("/full/tasks", json={"count": 1024}).status_code == 503
+        banner.wait_for(state="visible")
+        assert "refuses writes: database or disk is full" in banner.inner_text()
+
+        service.free_disk()
+        assert client.post("/full/tasks", json={"count": 1024}).status_code == 200
+        banner.wait_for(state="hidden")
         assert problems == PageProblems()
         page.close()
 

@@ -7,75 +7,22 @@ through SQLite's ``max_page_count``, and exceptions that are not SQLite's from t
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import sqlite3
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import httpx
 import pytest
-import uvicorn
+from in_process_service import ANSWER_WITHIN_S, InProcessService
 
 from common.client.teacher_client import Backoff, TeacherClient
 from common.kuka.task_space import KUKA_TASK_SPACE
-from teacher_service.app import create_app
-from teacher_service.core.config import Settings
-from teacher_service.process import free_port
-from teacher_service.store import Store
 
 TOKEN = "store-failure-test-token"
-ANSWER_WITHIN_S = 10.0
-"""Every request must be answered this soon, failure or not: before the fix, some never were."""
-
-T = TypeVar("T")
-
-
-class InProcessService:
-    """uvicorn serving ``create_app`` on a loop of its own thread; ``on_loop`` runs code there."""
-
-    def __init__(self, db: Path) -> None:
-        self.app = create_app(Settings(db=db, teacher_token=TOKEN, log_level="warning"))
-        self.port = free_port()
-        self.server = uvicorn.Server(
-            uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning", access_log=False)
-        )
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self.server.serve(),))
-
-    @property
-    def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
-
-    @property
-    def store(self) -> Store:
-        store: Store = self.app.state.registry._store
-        return store
-
-    def on_loop(self, function: Callable[[], T]) -> T:
-        """Run ``function`` on the service's event loop thread, where the store's connection lives."""
-
-        async def call() -> T:
-            return function()
-
-        return asyncio.run_coroutine_threadsafe(call(), self.loop).result(ANSWER_WITHIN_S)
-
-    def __enter__(self) -> InProcessService:
-        self.thread.start()
-        while not self.server.started:
-            if not self.thread.is_alive():
-                raise RuntimeError("the in-process service did not start")
-            self.thread.join(0.05)
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.server.should_exit = True
-        self.thread.join(30)
-        self.loop.close()
 
 
 class FailingConnection:
@@ -106,7 +53,7 @@ class FailingConnection:
 
 @pytest.fixture
 def service(tmp_path: Path) -> Iterator[InProcessService]:
-    with InProcessService(tmp_path / "teacher.db") as running:
+    with InProcessService(tmp_path / "teacher.db", TOKEN) as running:
         yield running
 
 
@@ -151,7 +98,7 @@ def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is
     acknowledged = _draw(http, "full", 1000).json()["tasks"]
     assert http.post("/curricula/full/results", json=_results(acknowledged[:20])).json()["accepted"] == 20
 
-    service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))  # never below the current size
+    service.fill_disk()  # never below the current size
     # A thousand tasks, or results, need new pages, and there is no room for them.
     _refused(_draw(http, "full", 1024), "database or disk is full")
     refused_results = http.post("/curricula/full/results", json=_results(acknowledged[20:]))
@@ -162,7 +109,7 @@ def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is
     assert (health.json()["status"], health.json()["writes_failing"]) == ("degraded", "database or disk is full")
     assert http.get("/curricula/full").json()["counters"]["results_received"] == 20
 
-    service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+    service.free_disk()
     assert len(_draw(http, "full", 1024).json()["tasks"]) == 1024
     assert http.get(f"{service.url}/healthz").json()["status"] == "ok", "recovered by itself at the next write"
     retried = http.post("/curricula/full/results", json=_results(acknowledged[20:])).json()
@@ -234,14 +181,14 @@ def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_r
     with TeacherClient(service.url, "client", token=TOKEN, prefetch=1000, backoff=Backoff(0.01, 0.2)) as client:
         client.register("random", KUKA_TASK_SPACE)
         assignments = [client.next_task() for _ in range(1000)]
-        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))
+        service.fill_disk()
         for assignment in assignments:
             client.report(assignment, reward=1.0)
         assert not client.flush(timeout=2.0)
         assert client.pending == 1000 and client.delivered == 0
         assert "HTTP 503: the teacher's database could not store this request: database or disk is full" in caplog.text
 
-        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+        service.free_disk()
         assert client.flush(timeout=30)
         assert client.delivered == 1000
     assert _stored_results(service.store.path, "client") == {a.task_id for a in assignments}
@@ -255,20 +202,26 @@ def test_a_fit_whose_record_meets_a_full_disk_is_run_again_by_the_restart(
     db = tmp_path / "teacher.db"
     body = {"teacher": "alp-gmm", "space": kuka_space, "seed": 0, "params": {"fit_rate": 200}}
     headers = {"Authorization": f"Bearer {TOKEN}"}
-    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http:
+    with (
+        InProcessService(db, TOKEN) as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http,
+    ):
         assert http.put("/curricula/fitting", json=body).status_code == 201
         tasks = _draw(http, "fitting", 200).json()["tasks"]
         assert http.post("/curricula/fitting/results", json=_results(tasks)).json()["accepted"] == 200  # fit 0 due
-        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1"))
+        service.fill_disk()
         while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
             time.sleep(0.05)
         with sqlite3.connect(db) as connection:
             assert connection.execute("SELECT COUNT(*) FROM fits").fetchone() == (0,), "the fit's record was lost"
         live = http.get("/curricula/fitting/state").json()
         assert [fit["index"] for fit in live["fits"]] == [0] and live["fits"][0]["error"] is None
-        service.on_loop(lambda: service.store._db.execute("PRAGMA max_page_count = 1073741823"))
+        service.free_disk()
 
-    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http:
+    with (
+        InProcessService(db, TOKEN) as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http,
+    ):
         while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
             time.sleep(0.05)
         restarted = http.get("/curricula/fitting/state").json()

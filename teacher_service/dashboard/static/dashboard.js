@@ -173,8 +173,18 @@ function showFitsStopped(reason) {
   alert.textContent = reason ? `No fits run: ${reason}. Tasks still come from each teacher's last model.` : "";
 }
 
+/** Says why the database refuses writes, while it does (a full disk); the whole service shares one database. */
+function showWritesFailing(reason) {
+  const alert = document.getElementById("writes-failing");
+  alert.hidden = !reason;
+  alert.textContent = reason
+    ? `The teacher's database refuses writes: ${reason}. New tasks and results wait (answered 503) until there is room.`
+    : "";
+}
+
 function renderCurricula(list) {
   showFitsStopped(list.curricula.map((c) => c.counters.fits_stopped).find((reason) => reason) ?? null);
+  showWritesFailing(list.curricula.map((c) => c.counters.writes_failing).find((reason) => reason) ?? null);
   const rows = document.getElementById("curricula-rows");
   rows.replaceChildren(
     ...list.curricula.map((curriculum) => {
@@ -571,6 +581,7 @@ function fitOutcome(fit) {
 
 function renderFits(state) {
   showFitsStopped(state.curriculum.counters.fits_stopped);
+  showWritesFailing(state.curriculum.counters.writes_failing);
   const fits = state.fits.slice(-FIT_ROWS).reverse();
   const notInstalled = state.fits.filter((fit) => fit.error !== null).length;
   const listed = fits.length < state.fits.length ? `, the newest ${fits.length} listed` : "";
