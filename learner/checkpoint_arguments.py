@@ -9,6 +9,7 @@ from pathlib import Path
 
 from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
+from common.levels import is_level_env
 from learner.arguments import UsageError
 from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 
@@ -46,8 +47,13 @@ def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE) -> Task:
 
 
 def checkpoint_task(text: str, checkpoint: Checkpoint) -> Task:
-    """``parse_task`` in the task space of the environment the checkpoint was trained on; a bad task
-    is a usage error."""
+    """``parse_task`` in the task space of the environment the checkpoint was trained on; a bad task,
+    or a checkpoint of a level family (which ``evaluate`` and ``render`` do not play), is a usage error."""
+    if is_level_env(checkpoint.config.env):
+        raise UsageError(
+            f"{checkpoint.path} was trained on the level family {checkpoint.config.env}; evaluate and render play "
+            "the KUKA families (its held-out success is eval/success_rate in the run's metrics.jsonl)"
+        )
     try:
         return parse_task(text, task_space_for(checkpoint.config.env))
     except ValueError as error:

@@ -8,9 +8,11 @@ import pytest
 from common.kuka import ENV_IDS
 from common.levels import HELD_OUT_FIRST_SEED, LEVEL_ENV_IDS
 from kuka_curriculum import main
+from learner.core.checkpoint import Counters, save_checkpoint
 from learner.core.config import TRAIN_ENV_IDS, TrainConfig
 from learner.core.kuka_policy import kuka_policy_spec, policy_spec_for
 from learner.core.periodic_evaluation import evaluation_seeds, evaluation_task
+from learner.core.ppo import PPOLearner
 
 
 def test_train_takes_the_kuka_families_and_the_listed_level_families_only():
@@ -47,3 +49,13 @@ def test_a_level_family_registers_its_teacher_without_the_kuka_parameters():
     assert TrainConfig(teacher="alp-gmm").teacher_params["reward_range"] == [-5.0, 10.0]
     config = TrainConfig(teacher="plr", env=LEVEL_ENV_IDS[0], teacher_overrides={"robust": True})
     assert config.teacher_params == {"robust": True}
+
+
+@pytest.mark.parametrize("command", ["evaluate", "render"])
+def test_evaluate_and_render_refuse_a_level_familys_checkpoint_in_one_line(tmp_path, capsys, command):
+    config = TrainConfig(teacher="plr", env=LEVEL_ENV_IDS[0], levels=20)
+    learner = PPOLearner(policy_spec_for(config.env, config.ppo), config.ppo, seed=0)
+    path = save_checkpoint(tmp_path / "run", learner.state_dict(), Counters(iteration=1, steps=10), config)
+    flags = ["--out", str(tmp_path / "policy.gif")] if command == "render" else []
+    assert main([command, str(path), *flags]) == 2
+    assert f"trained on the level family {LEVEL_ENV_IDS[0]}; evaluate and render play" in capsys.readouterr().err
