@@ -17,7 +17,7 @@ are in ``algorithms/levels.py``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
@@ -95,8 +95,12 @@ class PlrParams(TeacherParams):
     """ρ: the share of a replay drawn by staleness (draws since the level was last drawn) rather
     than by score, so old scores get refreshed."""
     replay_prob: float = Field(default=0.5, ge=0.0, le=1.0)
-    """The most a draw replays while some level has no score yet: it replays with probability
-    min(share of levels scored, replay_prob), and always once every level has a score."""
+    """While some level has no score yet, a draw replays with probability replay_prob (``fixed``)
+    or min(share of levels scored, replay_prob) (``proportionate``); once every level has one, always."""
+    replay_schedule: Literal["proportionate", "fixed"] | None = None
+    """How the replay probability grows (see ``replay_prob``); null means ``proportionate`` (the
+    authors' default) for PLR and ``fixed`` for robust PLR, which trains on replays alone and would
+    otherwise train on almost nothing until most levels had a score."""
     min_seen_share: float = Field(default=0.0, ge=0.0, le=1.0)
     """No replay until this share of the levels has a score (the authors' ρ of the schedule)."""
     robust: bool = False
@@ -130,8 +134,9 @@ class PlrTeacher(_LevelTeacher):
     def __init__(self, space: TaskSpace, seed: int, params: PlrParams | Mapping[str, Any] | None = None) -> None:
         super().__init__(space, seed, params)
         p = self.params
+        schedule = p.replay_schedule or ("fixed" if p.robust else "proportionate")
         self.sampler = LevelReplay(
-            space.level_count(), p.temperature, p.staleness_coef, p.replay_prob, p.min_seen_share
+            space.level_count(), p.temperature, p.staleness_coef, p.replay_prob, p.min_seen_share, schedule
         )
         self.returns = np.zeros(self.sampler.levels)
         """Each scored level's last return, the fallback score's baseline."""

@@ -49,8 +49,8 @@ class LevelReplay:
 
     Each draw either replays a level already scored or explores one not scored yet. Once a
     ``min_seen_share`` of the levels has a score, a draw replays with probability
-    ``min(seen share, replay_prob)`` (the authors' proportionate schedule), and always once every
-    level has one. A replay picks among the scored levels from the mixture
+    ``min(seen share, replay_prob)`` (the authors' ``proportionate`` schedule) or ``replay_prob``
+    (``fixed``), and always once every level has one. A replay picks among the scored levels from the mixture
     ``(1 - staleness_coef) * P_S + staleness_coef * P_C``: ``P_S`` by rank of score with
     ``temperature``, ``P_C`` in proportion to the draws since the level was last drawn (staleness).
     An exploring draw picks uniformly among the levels without a score. A new score replaces the old
@@ -67,13 +67,22 @@ class LevelReplay:
     )
 
     def __init__(
-        self, levels: int, temperature: float, staleness_coef: float, replay_prob: float, min_seen_share: float
+        self,
+        levels: int,
+        temperature: float,
+        staleness_coef: float,
+        replay_prob: float,
+        min_seen_share: float,
+        schedule: str = "proportionate",
     ) -> None:
         check_level_count(levels)
+        if schedule not in ("proportionate", "fixed"):
+            raise ValueError(f"schedule must be proportionate or fixed, got {schedule!r}")
         self.temperature = temperature
         self.staleness_coef = staleness_coef
         self.replay_prob = replay_prob
         self.min_seen_share = min_seen_share
+        self.schedule = schedule
         self.scores = np.zeros(levels)
         self.seen = np.zeros(levels, dtype=bool)
         self.last_drawn = np.zeros(levels, dtype=np.int64)
@@ -113,7 +122,7 @@ class LevelReplay:
             return 1.0
         if seen_share == 0.0 or seen_share < self.min_seen_share:
             return 0.0
-        return min(seen_share, self.replay_prob)
+        return self.replay_prob if self.schedule == "fixed" else min(seen_share, self.replay_prob)
 
     def _replays(self, uniform: float) -> bool:
         return uniform < self.replay_chance()

@@ -31,6 +31,17 @@ def test_robust_plr_marks_its_exploring_draws_for_scoring_only_and_trains_on_rep
     assert not any(score_only), "every level has a score: every draw replays and trains"
 
 
+def test_robust_plr_trains_on_half_its_draws_from_the_first_score() -> None:
+    thousand = TaskSpace([Parameter("level", 0, 999, type="integer")])
+    teacher = make_teacher("plr", thousand, 0, {"robust": True})
+    teacher.learn(EpisodeResult({"level": 0}, 1.0, score=1.0))
+    score_only = teacher.sample_marked(400)[1]
+    assert 0.4 < score_only.count(False) / 400 < 0.6, "the fixed schedule: replay_prob of the draws replay"
+    proportionate = make_teacher("plr", thousand, 0, {"robust": True, "replay_schedule": "proportionate"})
+    proportionate.learn(EpisodeResult({"level": 0}, 1.0, score=1.0))
+    assert proportionate.sample_marked(400)[1].count(False) < 20, "one level of 1,000 scored: almost no replay"
+
+
 def test_plain_plr_marks_nothing() -> None:
     teacher = make_teacher("plr", TEN, 0)
     assert teacher.sample_marked(30)[1] == [False] * 30

@@ -22,7 +22,7 @@ def test_pick_lands_in_proportion_to_the_weights() -> None:
     assert [pick(weights, u) for u in (0.0, 0.2499, 0.25, 0.999)] == [0, 0, 2, 2]
 
 
-def sampler(levels: int = 4, **overrides: float) -> LevelReplay:
+def sampler(levels: int = 4, **overrides: float | str) -> LevelReplay:
     settings = {"temperature": 1.0, "staleness_coef": 0.0, "replay_prob": 1.0, "min_seen_share": 0.0}
     return LevelReplay(levels, **{**settings, **overrides})
 
@@ -45,6 +45,14 @@ def test_the_replay_chance_is_the_seen_share_capped_by_replay_prob() -> None:
     assert plr.draw(np.array([0.41, 0.0, 0.0]))[1] is False
     plr.record(3, 1.0)
     assert plr.draw(np.array([0.99, 0.0, 0.0]))[1] is True, "every level scored: nothing is left to explore"
+
+
+def test_the_fixed_schedule_replays_at_replay_prob_once_a_level_has_a_score() -> None:
+    plr = sampler(replay_prob=0.5, schedule="fixed")
+    assert plr.replay_chance() == 0.0
+    plr.record(0, 1.0)  # seen share 1/4
+    assert plr.replay_chance() == 0.5
+    assert plr.draw(np.array([0.49, 0.0, 0.0]))[1] is True
 
 
 def test_no_replay_before_the_min_seen_share() -> None:
