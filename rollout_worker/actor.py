@@ -10,6 +10,7 @@ start-up time.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -50,6 +51,9 @@ class WorkerSettings:
     score_discount: ScoreDiscount | None = None
     """The learner's discount and GAE lambda: each episode's result carries its positive value loss as its
     score (None: results go without a score)."""
+    results_buffer: int = 100_000
+    """Most results a worker's client holds through a teacher outage before dropping the oldest
+    (``TeacherClient.max_buffered_results``, about 0.6 KB each)."""
 
 
 def make_env(env_id: str, max_steps: int) -> gym.Env[np.ndarray, Any]:
@@ -93,11 +97,13 @@ class RolloutWorker:
             token=settings.teacher_token,
             prefetch=2 * settings.num_envs,
             task_timeout=TASK_TIMEOUT_S,
+            max_buffered_results=settings.results_buffer,
         )
         envs = [make_env(settings.env_id, settings.max_episode_steps) for _ in range(settings.num_envs)]
         self.sampler = Sampler(envs, _TeacherTasks(self.client), seed, settings.score_discount)
         self.evaluation_env: gym.Env[np.ndarray, Any] | None = None
         self.policy: InferencePolicy | None = None
+        self._dropped_reported = 0
 
     def _load(self, snapshot: PolicySnapshot) -> InferencePolicy:
         if self.policy is None:
@@ -107,7 +113,11 @@ class RolloutWorker:
         return self.policy
 
     def sample(self, snapshot: PolicySnapshot) -> TrajectoryBatch:
-        return self.sampler.sample(self._load(snapshot), self.settings.rollout_length)
+        """A batch on these weights, with the teacher client's delivery counters (see ``TrajectoryBatch``)."""
+        batch = self.sampler.sample(self._load(snapshot), self.settings.rollout_length)
+        dropped_in_all = self.client.dropped_results
+        dropped, self._dropped_reported = dropped_in_all - self._dropped_reported, dropped_in_all
+        return dataclasses.replace(batch, results_waiting=self.client.pending, results_dropped=dropped)
 
     def evaluate(self, snapshot: PolicySnapshot, task: Task, seeds: Sequence[int]) -> list[EpisodeStats]:
         """Episodes on an environment of their own, so training episodes are not disturbed: deterministic on a

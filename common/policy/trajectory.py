@@ -54,6 +54,12 @@ class TrajectoryBatch:
     policy_version: int
     episodes: list[EpisodeStats] = field(default_factory=list)
     score_only: np.ndarray | None = None
+    results_waiting: int = 0
+    """Results the worker's teacher client held for delivery when the batch was made (an outage
+    shows here first)."""
+    results_dropped: int = 0
+    """Results the worker's client dropped since its previous batch: the oldest, once an outage
+    filled its buffer (``TeacherClient.max_buffered_results``)."""
 
     @property
     def num_steps(self) -> int:

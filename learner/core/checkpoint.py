@@ -29,6 +29,8 @@ class Counters:
     episodes: int = 0
     offline_episodes: int = 0
     worker_replacements: int = 0
+    results_dropped: int = 0
+    """Results the workers' teacher clients dropped through outages longer than their buffers."""
 
 
 @dataclass(frozen=True)

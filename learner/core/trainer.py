@@ -217,6 +217,7 @@ class _IterationLoop:
         counters.episodes += len(episodes)
         counters.offline_episodes += offline
         counters.worker_replacements += replacements
+        counters.results_dropped += sum(batch.results_dropped for batch in batches)
         self.trainer.recent_episodes.extend(episodes)
         return {
             "iteration": float(counters.iteration),
@@ -227,6 +228,8 @@ class _IterationLoop:
             "train/success_rate": _mean(e.success for e in episodes),
             "train/episode_length": _mean(e.length for e in episodes),
             "workers/replacements": float(counters.worker_replacements),
+            "teacher/results_waiting": float(sum(batch.results_waiting for batch in batches)),
+            "teacher/results_dropped": float(counters.results_dropped),
         }
 
     def _start_evaluation(self, snapshot_ref: ray.ObjectRef[PolicySnapshot]) -> None:
