@@ -71,8 +71,14 @@ class StoppablePool(ProcessPoolExecutor):
         )
 
     def submit(self, fn: Callable[..., Result], /, *args: Any, **kwargs: Any) -> Future[Result]:
-        with _children_ignore_ctrl_c():  # the pool starts its processes as work is submitted
-            return super().submit(fn, *args, **kwargs)
+        # The pool starts its processes as work is submitted, while it has fewer than it may have. Only
+        # those submits ignore Ctrl-C: a Ctrl-C that lands while it is ignored is lost, and ignoring it
+        # around every submit lost one pressed during a long run of submits (the Ctrl-C tests hung).
+        processes: dict[int, Any] = getattr(self, "_processes", None) or {}
+        if len(processes) < getattr(self, "_max_workers", 0):
+            with _children_ignore_ctrl_c():
+                return super().submit(fn, *args, **kwargs)
+        return super().submit(fn, *args, **kwargs)
 
     def __exit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, traceback: TracebackType | None
