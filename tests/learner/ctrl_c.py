@@ -29,7 +29,11 @@ def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, st
         while len(spawned_children(child.pid)) < workers:
             assert child.poll() is None and time.monotonic() < deadline, "".join(stderr)
             time.sleep(0.05)
-        time.sleep(0.2)  # past the pool's start, and still long before its workers have imported torch
+        # Past the pool's start, and still long before its workers have imported torch. The parent
+        # ignores Ctrl-C while it starts a process, and starting one waits for the child to read its
+        # start-up data (the policy's weights among them): on a loaded machine a child took longer
+        # than the 0.2 s this waited before, and the Ctrl-C was lost (both full runs of 2026-11-29).
+        time.sleep(1.0)
         os.killpg(child.pid, signal.SIGINT)
         code = child.wait(timeout=STOP_TIMEOUT_S)
     finally:
