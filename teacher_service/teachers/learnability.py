@@ -62,7 +62,7 @@ from scipy.spatial import cKDTree
 from common.client.task_space import Task, TaskSpace
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
-from teacher_service.teachers.levels import LEVELS_SHOWN, level_space_problem
+from teacher_service.teachers.levels import level_space_problem, level_table
 from teacher_service.teachers.params import FiniteFloat, TeacherParams
 from teacher_service.teachers.performance import UNKNOWN_SUCCESS
 from teacher_service.teachers.row_log import RowLog
@@ -136,6 +136,8 @@ class LearnabilityTeacher(Teacher):
         self._cdf = np.empty(0)
         self._levels = space.level_count() if space.types == frozenset({"integer"}) else 0
         """The level count of an all-integer space (each level scored on its own), else 0 (a box)."""
+        self._level_units = self._units_of_levels() if self._levels else np.empty((0, self._dims))
+        """Each level's task in unit coordinates, one row per level: a refresh's pool over levels."""
 
     @classmethod
     def space_problem(cls, space: TaskSpace) -> str | None:
@@ -154,7 +156,7 @@ class LearnabilityTeacher(Teacher):
         if self._levels:
             # A fresh draw is a uniform level: level i owns [i / n, (i + 1) / n) of the third uniform.
             fresh_levels = np.minimum((uniforms[:, 2] * self._levels).astype(np.int64), self._levels - 1)
-            units = self._level_units(fresh_levels)
+            units = self._level_units[fresh_levels]
         if len(self._pool):
             replay = uniforms[:, 0] >= self.params.fresh_share
             picks = np.minimum(np.searchsorted(self._cdf, uniforms[replay, 1], side="right"), len(self._pool) - 1)
@@ -185,10 +187,9 @@ class LearnabilityTeacher(Teacher):
             outcomes[unflagged] = (rewards[unflagged] > bar).astype(float)
         return outcomes, bar
 
-    def _level_units(self, levels: np.ndarray) -> np.ndarray:
-        """The unit coordinates of levels ``levels`` (one row each)."""
-        tasks = np.array([self.space.to_array(self.space.level_task(int(level))) for level in levels])
-        return self.space.to_unit(tasks.reshape(len(levels), self._dims))
+    def _units_of_levels(self) -> np.ndarray:
+        tasks = np.array([self.space.to_array(self.space.level_task(level)) for level in range(self._levels)])
+        return self.space.to_unit(tasks.reshape(self._levels, self._dims))
 
     def _refresh_levels(self, held: np.ndarray) -> None:
         """Every level scored from its own held results, with the prior's pseudo-results."""
@@ -199,7 +200,7 @@ class LearnabilityTeacher(Teacher):
         results = np.bincount(played, minlength=self._levels)
         successes = np.bincount(played, weights=outcomes, minlength=self._levels)
         params = self.params
-        self._pool = self._level_units(np.arange(self._levels))
+        self._pool = self._level_units.copy()
         self._success = (successes + params.prior_weight * params.prior_success) / (results + params.prior_weight)
         self._refresh_choice()
 
@@ -274,22 +275,17 @@ class LearnabilityTeacher(Teacher):
         }
 
     def _level_table(self, learnability: np.ndarray, chance: np.ndarray) -> dict[str, Any]:
-        """The ``LEVELS_SHOWN`` likeliest next levels, as the other level kinds show theirs."""
+        """The likeliest next levels, as the other level kinds show theirs."""
         fresh = self.params.fresh_share if len(chance) else 1.0  # uniform until the first refresh
         probability = np.full(self._levels, fresh / self._levels)
         if len(chance):
             probability += chance * (1.0 - fresh)
-        shown = np.argsort(-probability, kind="stable")[:LEVELS_SHOWN]
-        return {
-            "level_count": self._levels,
-            "levels": [
-                {
-                    "level": int(level),
-                    "task": self.space.level_task(int(level)),
-                    "probability": float(probability[level]),
-                    "success": float(self._success[level]) if len(self._success) else None,
-                    "learnability": float(learnability[level]) if len(learnability) else None,
-                }
-                for level in shown
-            ],
-        }
+        unknown = np.full(self._levels, np.nan)  # no estimate before the first refresh
+        return level_table(
+            self.space,
+            probability,
+            {
+                "success": self._success if len(self._success) else unknown,
+                "learnability": learnability if len(learnability) else unknown,
+            },
+        )

@@ -66,22 +66,25 @@ class _LevelTeacher(Teacher):
         self.sampler.loaded()
 
     def _level_table(self, columns: Mapping[str, np.ndarray]) -> dict[str, Any]:
-        """The ``LEVELS_SHOWN`` likeliest next levels, most likely first, with ``columns`` per level (a
-        NaN, such as an unscored level's score, shows as null)."""
-        probability = self.sampler.probabilities()
-        shown = np.argsort(-probability, kind="stable")[:LEVELS_SHOWN]
-        return {
-            "level_count": self.sampler.levels,
-            "levels": [
-                {
-                    "level": int(level),
-                    "task": self.space.level_task(int(level)),
-                    "probability": float(probability[level]),
-                    **{name: _number(values[level]) for name, values in columns.items()},
-                }
-                for level in shown
-            ],
-        }
+        return level_table(self.space, self.sampler.probabilities(), columns)
+
+
+def level_table(space: TaskSpace, probability: np.ndarray, columns: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """The dashboard's view of a level teacher: the ``LEVELS_SHOWN`` likeliest next levels, most likely
+    first, with ``columns`` per level (a NaN, such as an unscored level's score, shows as null)."""
+    shown = np.argsort(-probability, kind="stable")[:LEVELS_SHOWN]
+    return {
+        "level_count": len(probability),
+        "levels": [
+            {
+                "level": int(level),
+                "task": space.level_task(int(level)),
+                "probability": float(probability[level]),
+                **{name: _number(values[level]) for name, values in columns.items()},
+            }
+            for level in shown
+        ],
+    }
 
 
 def _number(value: float) -> float | None:
