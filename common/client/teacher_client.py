@@ -42,13 +42,23 @@ What it guarantees:
   one, results stay buffered and the next ``report``/``flush`` raises it.
 
 Use one client per process (a Ray actor builds its own); it is safe to share between threads.
+
+A delivery log, for fault benches (``bench/chaos.py``), off unless asked for: with
+``KC_RESULT_LOG`` naming a file (or ``result_log`` given), every client appends one JSON line per
+acknowledged delivery (``"acknowledged"``: the task ids the service answered for, with its
+``accepted``, ``duplicates`` and ``expired`` counts) and one per 5xx answer (``"status"``, the
+request and the service's reason). Each line is one ``write`` to the file opened for appending, so
+the clients of several processes can share the file. A line is written after the answer came, so
+a process killed in between leaves out a delivery the service did acknowledge, never the reverse.
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import math
+import os
 import random
 import threading
 import time
@@ -78,6 +88,8 @@ from common.client.task_space import Task, TaskSpace
 log = logging.getLogger(__name__)
 
 _RETRYABLE_STATUS = frozenset({408, 429})
+RESULT_LOG_VARIABLE = "KC_RESULT_LOG"
+"""Names the file a client appends its delivery log to (see the module doc); unset or empty: no log."""
 
 
 class TeacherClientError(RuntimeError):
@@ -128,6 +140,28 @@ class _Transient(Exception):
     """A failure worth retrying (connection error, timeout, 5xx, 408, 429)."""
 
 
+class _DeliveryLog:
+    """The opt-in delivery log (see the module doc): JSON lines appended, each with one ``write``."""
+
+    def __init__(self, path: str | os.PathLike[str], curriculum: str) -> None:
+        self.path = os.fspath(path)
+        self.curriculum = curriculum
+        self._failed = False
+
+    def write(self, **record: Any) -> None:
+        line = json.dumps({"at": time.time(), "pid": os.getpid(), "curriculum": self.curriculum, **record})
+        try:
+            descriptor = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+            try:
+                os.write(descriptor, (line + "\n").encode())
+            finally:
+                os.close(descriptor)
+        except OSError as error:
+            if not self._failed:  # once: a log for benches must not flood a worker's own
+                log.warning("cannot append to the delivery log %s: %s", self.path, error)
+            self._failed = True
+
+
 class TeacherClient:
     """Draws tasks from and reports results to one curriculum of a teacher service."""
 
@@ -144,6 +178,7 @@ class TeacherClient:
         backoff: Backoff = Backoff(),
         report_interval: float = 0.0,
         max_buffered_results: int = 100_000,
+        result_log: str | os.PathLike[str] | None = None,
     ) -> None:
         """``prefetch`` tasks are drawn per request; ``task_timeout`` bounds how long ``next_task``
         keeps retrying before it hands out an offline assignment; ``recent_tasks`` issued tasks are
@@ -151,7 +186,8 @@ class TeacherClient:
         that the results reported meanwhile go out in one request (``flush`` and ``close`` cut the
         wait short): one request per result costs a producer of short episodes a few milliseconds each.
         At most ``max_buffered_results`` results wait for delivery; beyond that the oldest are dropped
-        (see the module doc)."""
+        (see the module doc). ``result_log`` (default: ``KC_RESULT_LOG``) names a delivery log to
+        append to (see the module doc)."""
         if not 1 <= prefetch <= MAX_TASKS_PER_REQUEST:
             raise ValueError(f"prefetch must be in [1, {MAX_TASKS_PER_REQUEST}], got {prefetch}")
         if max_buffered_results < 1:
@@ -167,6 +203,8 @@ class TeacherClient:
         headers = {"Authorization": f"Bearer {secret}"} if secret else {}
         self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=request_timeout)
         self._path = f"{API_PREFIX}/curricula/{curriculum}"
+        log_path = os.environ.get(RESULT_LOG_VARIABLE) if result_log is None else result_log
+        self._delivery_log = _DeliveryLog(log_path, curriculum) if log_path else None
 
         self._task_lock = threading.Lock()
         self._tasks: deque[Assignment] = deque()
@@ -374,6 +412,13 @@ class TeacherClient:
                 continue
             attempt = 0
             self._fatal = None
+            if self._delivery_log is not None:
+                self._delivery_log.write(
+                    acknowledged=[item.task_id for item in batch],
+                    accepted=ack.accepted,
+                    duplicates=ack.duplicates,
+                    expired=ack.expired,
+                )
             self.delivered += len(batch)
             self.already_stored += ack.duplicates
             self._settle(batch, keep=[])
@@ -431,6 +476,8 @@ class TeacherClient:
             response = self._http.request(method, path, json=payload)
         except httpx.TransportError as error:
             raise _Transient(f"{type(error).__name__}: {error}") from None
+        if response.status_code >= 500 and self._delivery_log is not None:
+            self._delivery_log.write(status=response.status_code, method=method, path=path, detail=_detail(response))
         if response.status_code >= 500 or response.status_code in _RETRYABLE_STATUS:
             raise _Transient(f"HTTP {response.status_code}: {_detail(response)}")
         if response.status_code >= 400:

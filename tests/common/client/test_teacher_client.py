@@ -5,6 +5,8 @@ The module shares one service (tests that kill it start it again); each test has
 
 from __future__ import annotations
 
+import http.server
+import json
 import logging
 import os
 import signal
@@ -19,6 +21,7 @@ import pytest
 
 from common.client.task_space import Parameter, TaskSpace
 from common.client.teacher_client import (
+    RESULT_LOG_VARIABLE,
     Assignment,
     Backoff,
     TeacherClient,
@@ -294,3 +297,56 @@ def test_a_service_killed_between_storing_results_and_answering_keeps_each_resul
     with sqlite3.connect(tmp_path / "teacher.db") as connection:
         stored = connection.execute("SELECT COUNT(*), COUNT(DISTINCT task_index) FROM results").fetchone()
     assert stored == (len(reported), len(set(reported))) and len(reported) == len(set(reported))
+
+
+class _FullDiskThenAck(http.server.BaseHTTPRequestHandler):
+    """A stand-in service: its first two result deliveries get the 503 of a full disk, then an ack."""
+
+    refusals = 2
+
+    def do_POST(self) -> None:  # noqa: N802 (http.server's name)
+        body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
+        if type(self).refusals:
+            type(self).refusals -= 1
+            status, answer = 503, {"detail": "the teacher's database could not store this request: disk is full"}
+        else:
+            status, answer = 200, {"accepted": len(body["results"]), "duplicates": 0, "expired": 0}
+        payload = json.dumps(answer).encode()
+        self.send_response(status)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(payload)))
+        self.end_headers()
+        self.wfile.write(payload)
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+
+def test_the_opt_in_delivery_log_names_each_acknowledged_task_and_each_5xx(tmp_path, monkeypatch):
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _FullDiskThenAck)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_port}"
+    monkeypatch.delenv(RESULT_LOG_VARIABLE, raising=False)
+    try:
+        with TeacherClient(url, "quiet", backoff=FAST_RETRIES) as quiet:
+            quiet.report(Assignment("quiet:0", {}), reward=1.0)
+            assert quiet.flush(timeout=30)
+        assert list(tmp_path.iterdir()) == [], "no log unless one is asked for"
+
+        log_file = tmp_path / "delivered.jsonl"
+        monkeypatch.setenv(RESULT_LOG_VARIABLE, str(log_file))
+        _FullDiskThenAck.refusals = 2
+        with TeacherClient(url, "logged", backoff=FAST_RETRIES) as client:
+            for index in range(3):
+                client.report(Assignment(f"logged:{index}", {}), reward=1.0)
+            assert client.flush(timeout=30)
+    finally:
+        server.shutdown()
+        server.server_close()
+    records = [json.loads(line) for line in log_file.read_text().splitlines()]
+    refused = [record for record in records if "status" in record]
+    assert [(r["status"], r["method"], r["curriculum"]) for r in refused] == [(503, "POST", "logged")] * 2
+    assert all("disk is full" in r["detail"] for r in refused)
+    acknowledged = [task for record in records for task in record.get("acknowledged", [])]
+    assert sorted(acknowledged) == ["logged:0", "logged:1", "logged:2"]
+    assert all(record["pid"] == os.getpid() for record in records)
