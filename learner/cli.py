@@ -130,6 +130,11 @@ def _train(args: argparse.Namespace) -> int:
         path = latest_checkpoint(args.run_dir)
         if path is not None:
             checkpoint = load_checkpoint(path)
+            if checkpoint.evaluation_only:
+                raise UsageError(
+                    f"{path} is an evaluation-only checkpoint (an archived run's, its optimiser state left out): "
+                    "evaluate and render read it, but training cannot resume from it"
+                )
         elif args.resume:
             raise UsageError(f"--resume: no checkpoint in {args.run_dir / 'checkpoints'}")
     try:

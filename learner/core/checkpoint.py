@@ -4,6 +4,11 @@ A checkpoint holds the policy, the optimiser, the observation normaliser, the sh
 run's counters and its config. Files are written to a temporary name and renamed, so a crash while
 saving never leaves a truncated checkpoint behind; tensors and plain values only, so loading
 needs no pickle.
+
+An evaluation-only checkpoint (``save_evaluation_only``) leaves out what only resuming reads, the
+optimiser's state and the shuffling RNG, about two thirds of the file: the final checkpoint an archived
+run keeps for git is one (``learner.experiments.run_archive``). It evaluates and renders as the full
+one does; resuming from it stops with ``EvaluationOnlyCheckpointError``.
 """
 
 from __future__ import annotations
@@ -18,6 +23,12 @@ import torch
 from learner.core.config import TrainConfig
 
 CHECKPOINT_DIR = "checkpoints"
+RESUME_ONLY_STATE = ("optimizer", "shuffle_rng")
+"""The learner state that only resuming reads, which an evaluation-only checkpoint leaves out."""
+
+
+class EvaluationOnlyCheckpointError(ValueError):
+    """Training was asked to resume from an evaluation-only checkpoint, which holds no optimiser state."""
 
 
 @dataclass
@@ -40,15 +51,37 @@ class Checkpoint:
     counters: Counters
     config: TrainConfig
 
+    @property
+    def evaluation_only(self) -> bool:
+        """Whether the optimiser's state and the shuffling RNG were left out (``save_evaluation_only``)."""
+        return any(name not in self.learner for name in RESUME_ONLY_STATE)
+
+
+def checkpoint_path(run_dir: Path, steps: int) -> Path:
+    """Where a run's checkpoint at ``steps`` environment steps lies."""
+    return Path(run_dir) / CHECKPOINT_DIR / f"step_{steps:010d}.pt"
+
+
+def _write(data: dict[str, Any], path: Path) -> None:
+    partial = path.with_suffix(".pt.partial")
+    torch.save(data, partial)
+    os.replace(partial, path)
+
 
 def save_checkpoint(run_dir: Path, learner_state: dict[str, Any], counters: Counters, config: TrainConfig) -> Path:
-    directory = Path(run_dir) / CHECKPOINT_DIR
-    directory.mkdir(parents=True, exist_ok=True)
-    path = directory / f"step_{counters.steps:010d}.pt"
-    partial = path.with_suffix(".pt.partial")
-    torch.save({"learner": learner_state, "counters": asdict(counters), "config": config.to_dict()}, partial)
-    os.replace(partial, path)
+    path = checkpoint_path(run_dir, counters.steps)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write({"learner": learner_state, "counters": asdict(counters), "config": config.to_dict()}, path)
     return path
+
+
+def save_evaluation_only(source: Path, target: Path) -> Path:
+    """Write checkpoint ``source`` at ``target`` (the same path rewrites it in place) without the state that
+    only resuming reads; the policy, the normaliser, the counters and the config are kept as they are."""
+    data = torch.load(source, weights_only=True)
+    data["learner"] = {name: value for name, value in data["learner"].items() if name not in RESUME_ONLY_STATE}
+    _write(data, Path(target))
+    return Path(target)
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:

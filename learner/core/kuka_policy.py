@@ -62,5 +62,5 @@ def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
     """The policy a checkpoint holds, in the form the rollout workers act with."""
     spec = policy_spec_for(checkpoint.config.env, checkpoint.config.ppo)
     learner = PPOLearner(spec, checkpoint.config.ppo, checkpoint.config.seed)
-    learner.load_state_dict(checkpoint.learner)
+    learner.load_policy_state(checkpoint.learner)
     return learner.snapshot()

@@ -16,6 +16,7 @@ from torch import nn
 from common.policy.actor_critic import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec, capture_snapshot
 from common.policy.normalizer import NormalizerState, RunningNormalizer
 from common.policy.trajectory import TrajectoryBatch
+from learner.core.checkpoint import RESUME_ONLY_STATE, EvaluationOnlyCheckpointError
 from learner.core.config import PPOConfig
 
 
@@ -215,12 +216,23 @@ class PPOLearner:
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.network.load_state_dict(state["network"])
+        """Everything a resumed run continues from; an evaluation-only checkpoint's state, which has no
+        optimiser state, raises ``EvaluationOnlyCheckpointError``."""
+        if missing := [name for name in RESUME_ONLY_STATE if name not in state]:
+            raise EvaluationOnlyCheckpointError(
+                f"the learner state has no {' or '.join(missing)}: an evaluation-only checkpoint, whose policy "
+                "can be evaluated and rendered but from which training cannot resume"
+            )
+        self.load_policy_state(state)
         self.optimizer.load_state_dict(state["optimizer"])
+        self.shuffle.set_state(state["shuffle_rng"])
+
+    def load_policy_state(self, state: dict[str, Any]) -> None:
+        """The policy alone (network, normaliser and version), as evaluation reads it; no optimiser state needed."""
+        self.network.load_state_dict(state["network"])
         saved = state["normalizer"]
         restored = {name: np.asarray(value) for name, value in saved.items()}
         self.normalizer.load_state(NormalizerState(**restored))  # type: ignore[arg-type]  # count: a 0-d array, used as a float
-        self.shuffle.set_state(state["shuffle_rng"])
         self.version = int(state["version"])
 
 

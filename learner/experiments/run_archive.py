@@ -6,11 +6,12 @@ The write-up reads three of them: the metrics (learning curves), the final evalu
 checkpoint (so a reader can evaluate it again). Once a bake-off run or a tune trial is trained (and
 evaluated), ``archive_run`` leaves the run in this form:
 
-- for git (``WRITE_UP_FILES``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` and
-  ``checkpoints/`` with the final checkpoint alone, the earlier ones deleted;
-- on disk only (``RESUME_FILES``, git-ignored): ``teacher.sqlite.xz``, ``train.log.xz`` and
-  ``teacher.log.xz``, which ``restore_run`` decompresses before a larger budget resumes the run, and
-  ``tensorboard/``.
+- for git (``write_up_files``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` and
+  ``checkpoints/`` with the final checkpoint alone, evaluation-only (``save_evaluation_only``: no
+  optimiser state, a third of the size; evaluate and render read it), the earlier ones deleted;
+- on disk only (``resume_files``, git-ignored): ``resume.pt``, the final checkpoint in full, and
+  ``teacher.sqlite.xz``, ``train.log.xz`` and ``teacher.log.xz``, which ``restore_run`` puts back
+  before a larger budget resumes the run, and ``tensorboard/``.
 
 Readers go through ``read_text``, which takes either form, so directories written before archiving
 existed (the committed v1 bake-offs) read as they are. The measured sizes: docs/results/bakeoff-hard.md.
@@ -32,13 +33,22 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from learner.core.checkpoint import CHECKPOINT_DIR, latest_checkpoint
+from learner.core.checkpoint import (
+    CHECKPOINT_DIR,
+    checkpoint_path,
+    latest_checkpoint,
+    load_checkpoint,
+    save_evaluation_only,
+)
 from learner.core.metrics import METRICS_FILE
 
 SUFFIX = ".xz"
 TRAIN_LOG = "train.log"
 EVALUATION_FILE = "evaluation.json"
 """A bake-off run's final evaluation (``bakeoff_runs``), kept as it is."""
+RESUME_CHECKPOINT = "resume.pt"
+"""The final checkpoint in full, optimiser state included, for resuming: on disk only, while git keeps its
+evaluation-only copy in ``checkpoints/``."""
 TENSORBOARD_DIR = "tensorboard"
 """The run's TensorBoard events, which duplicate its metrics log: left on disk, never for git."""
 
@@ -58,16 +68,17 @@ def _raw_files() -> tuple[str, ...]:
 
 def write_up_files() -> tuple[str, ...]:
     """The paths, relative to the run directory, that an archived run keeps for the write-up and git:
-    the final evaluation, the compressed metrics and the checkpoints directory (holding the final one)."""
+    the final evaluation, the compressed metrics and the checkpoints directory (holding the final one,
+    evaluation-only)."""
     return EVALUATION_FILE, METRICS_FILE + SUFFIX, CHECKPOINT_DIR
 
 
 def resume_files() -> tuple[str, ...]:
     """The paths, relative to the run directory, that an archived run keeps on disk only (git-ignored):
-    what ``restore_run`` needs to resume it (the compressed teacher database and logs) and TensorBoard's
-    events."""
+    what ``restore_run`` needs to resume it (the full final checkpoint, the compressed teacher database
+    and logs) and TensorBoard's events."""
     database, _metrics, *logs = _raw_files()
-    return (database + SUFFIX, *(log + SUFFIX for log in logs), TENSORBOARD_DIR)
+    return (RESUME_CHECKPOINT, database + SUFFIX, *(log + SUFFIX for log in logs), TENSORBOARD_DIR)
 
 
 def compressed(path: Path) -> Path:
@@ -144,7 +155,8 @@ def _unpack(path: Path) -> None:
 
 
 def archive_run(run_dir: Path) -> None:
-    """Compress a finished, evaluated run's raw files and keep only its latest (evaluated) checkpoint.
+    """Compress a finished, evaluated run's raw files and keep only its latest (evaluated) checkpoint,
+    evaluation-only, with its full form moved to ``RESUME_CHECKPOINT``.
 
     Call it only when no process has the run open. A run already archived is left untouched.
     """
@@ -158,10 +170,21 @@ def archive_run(run_dir: Path) -> None:
     for entry in (run_dir / CHECKPOINT_DIR).glob("*"):
         if entry != final and entry.is_file():
             entry.unlink()
+    if final is not None and not load_checkpoint(final).evaluation_only:
+        # The full copy is whole before the final checkpoint is slimmed, so an interruption loses nothing.
+        partial = run_dir / (RESUME_CHECKPOINT + ".partial")
+        shutil.copyfile(final, partial)
+        os.replace(partial, run_dir / RESUME_CHECKPOINT)
+        save_evaluation_only(final, final)
 
 
 def restore_run(run_dir: Path) -> None:
-    """Decompress an archived run's raw files, so training can resume it from its checkpoint."""
+    """Put back an archived run's full final checkpoint and decompress its raw files, so training can
+    resume it from that checkpoint. A run archived without its full checkpoint (the committed ones, in a
+    clone) keeps the evaluation-only one, which training refuses to resume from."""
+    full = Path(run_dir) / RESUME_CHECKPOINT
+    if full.exists():
+        os.replace(full, checkpoint_path(run_dir, load_checkpoint(full).counters.steps))
     for name in _raw_files():
         path = Path(run_dir) / name
         if path.exists():

@@ -36,6 +36,7 @@ from learner.experiments.bakeoff_runs import (
 )
 from learner.experiments.bakeoff_statistics import HALF_SUCCESS, TeacherResult, median_steps, steps_to_success
 from learner.experiments.run_archive import (
+    RESUME_CHECKPOINT,
     TENSORBOARD_DIR,
     archive_run,
     read_text,
@@ -89,6 +90,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         "checkpoints",
         "evaluation.json",
         "metrics.jsonl.xz",
+        "resume.pt",
         "teacher.log.xz",
         "teacher.sqlite.xz",
         "tensorboard",
@@ -96,7 +98,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     ]
     # For git what the report reads; the rest only on disk, for resuming.
     assert sorted(write_up_files()) == ["checkpoints", "evaluation.json", "metrics.jsonl.xz"]
-    assert sorted(resume_files()) == ["teacher.log.xz", "teacher.sqlite.xz", "tensorboard", "train.log.xz"]
+    assert sorted(resume_files()) == ["resume.pt", "teacher.log.xz", "teacher.sqlite.xz", "tensorboard", "train.log.xz"]
     capsys.readouterr()
 
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
@@ -118,6 +120,9 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
             assert database.execute("SELECT count(*) FROM sqlite_master").fetchone()[0] > 0
         checkpoint = load_checkpoint(latest_checkpoint(run.directory))
         assert checkpoint.counters.steps == 2 * BATCH and checkpoint.config.teacher == run.teacher
+        # The kept checkpoint is evaluation-only; the full one, which resumed `fixed`, stays on disk beside it.
+        full = load_checkpoint(run.directory / RESUME_CHECKPOINT)
+        assert checkpoint.evaluation_only and not full.evaluation_only and full.counters == checkpoint.counters
         assert checkpoint.config.workers == 1 and checkpoint.config.max_episode_steps == 60
         assert checkpoint.config.ppo.update_epochs == 2
         assert sorted(learning_curve(run)) == [BATCH, 2 * BATCH]
@@ -390,9 +395,11 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
 
     archive_run(run.directory)
     names = sorted(path.name for path in run.directory.iterdir())
-    assert names == ["checkpoints", "metrics.jsonl.xz", "teacher.sqlite.xz", "train.log.xz"]
+    assert names == ["checkpoints", "metrics.jsonl.xz", "resume.pt", "teacher.sqlite.xz", "train.log.xz"]
     assert set(names) - set(write_up_files()) <= set(resume_files()), "nothing else stays beside the write-up's"
     assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [final.name]
+    assert load_checkpoint(final).evaluation_only, "git keeps the final checkpoint without its optimiser state"
+    assert not load_checkpoint(run.directory / RESUME_CHECKPOINT).evaluation_only, "the disk keeps it whole"
     assert run.steps_done() == 512, "the kept checkpoint still marks the run finished"
     assert learning_curve(run, "eval/success_rate") == raw_curve
     assert steps_to_success(run, target=0.5, window=1) == 200
@@ -402,6 +409,7 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     assert {path: path.stat().st_mtime_ns for path in archived} == archived, "archiving twice changes nothing"
 
     restore_run(run.directory)
+    assert not load_checkpoint(final).evaluation_only and not (run.directory / RESUME_CHECKPOINT).exists()
     assert (run.directory / "metrics.jsonl").read_text() == metrics
     assert not list(run.directory.glob("*.xz"))
     with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
