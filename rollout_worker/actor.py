@@ -11,7 +11,7 @@ start-up time.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,11 +27,15 @@ from common.kuka.env import make_kuka_env
 from common.levels import is_level_env
 from common.policy.inference import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
-from rollout_worker.sampler import Sampler, ScoreDiscount, run_episodes
+from rollout_worker.sampler import Sampler, ScoreDiscount, TaskSource, run_episodes
 
 TASK_TIMEOUT_S = 2.0
 """How long a worker waits for the teacher before playing an offline episode: short, because
 every environment whose episode ends during an outage pays it."""
+
+
+TaskSourceFactory = Callable[[int], TaskSource]
+"""Builds a worker's task source from the worker's seed, inside the worker (so it must pickle)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,10 @@ class WorkerSettings:
     results_buffer: int = 100_000
     """Most results a worker's client holds through a teacher outage before dropping the oldest
     (``TeacherClient.max_buffered_results``, about 0.6 KB each)."""
+    task_source: TaskSourceFactory | None = None
+    """Where tasks come from and results go instead of the teacher service (None: the service at
+    ``teacher_url``): a benchmark's stand-in, such as no curriculum at all or another library's
+    curriculum, run with the same workers and learner."""
 
 
 def make_env(env_id: str, max_steps: int) -> gym.Env[np.ndarray, Any]:
@@ -91,16 +99,22 @@ class RolloutWorker:
     def __init__(self, settings: WorkerSettings, seed: int) -> None:
         self.settings = settings
         self.seed = seed
-        self.client = TeacherClient(
-            settings.teacher_url,
-            settings.curriculum,
-            token=settings.teacher_token,
-            prefetch=2 * settings.num_envs,
-            task_timeout=TASK_TIMEOUT_S,
-            max_buffered_results=settings.results_buffer,
-        )
+        self.client: TeacherClient | None = None
+        tasks: TaskSource
+        if settings.task_source is not None:
+            tasks = settings.task_source(seed)
+        else:
+            self.client = TeacherClient(
+                settings.teacher_url,
+                settings.curriculum,
+                token=settings.teacher_token,
+                prefetch=2 * settings.num_envs,
+                task_timeout=TASK_TIMEOUT_S,
+                max_buffered_results=settings.results_buffer,
+            )
+            tasks = _TeacherTasks(self.client)
         envs = [make_env(settings.env_id, settings.max_episode_steps) for _ in range(settings.num_envs)]
-        self.sampler = Sampler(envs, _TeacherTasks(self.client), seed, settings.score_discount)
+        self.sampler = Sampler(envs, tasks, seed, settings.score_discount)
         self.evaluation_env: gym.Env[np.ndarray, Any] | None = None
         self.policy: InferencePolicy | None = None
         self._dropped_reported = 0
@@ -115,6 +129,8 @@ class RolloutWorker:
     def sample(self, snapshot: PolicySnapshot) -> TrajectoryBatch:
         """A batch on these weights, with the teacher client's delivery counters (see ``TrajectoryBatch``)."""
         batch = self.sampler.sample(self._load(snapshot), self.settings.rollout_length)
+        if self.client is None:
+            return batch
         dropped_in_all = self.client.dropped_results
         dropped, self._dropped_reported = dropped_in_all - self._dropped_reported, dropped_in_all
         return dataclasses.replace(batch, results_waiting=self.client.pending, results_dropped=dropped)
@@ -130,4 +146,5 @@ class RolloutWorker:
 
     def close(self) -> None:
         """Deliver every buffered episode result to the teacher."""
-        self.client.close()
+        if self.client is not None:
+            self.client.close()

@@ -39,7 +39,7 @@ from learner.core.kuka_policy import policy_spec_for
 from learner.core.metrics import MetricsLog
 from learner.core.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
 from learner.core.ppo import PPOLearner
-from rollout_worker.actor import WorkerSettings
+from rollout_worker.actor import TaskSourceFactory, WorkerSettings
 from rollout_worker.pool import InFlight, WorkerPool
 from rollout_worker.sampler import ScoreDiscount
 
@@ -69,9 +69,12 @@ class Trainer:
         teacher_token: SecretStr | None = None,
         resume_from: Checkpoint | None = None,
         actor_name_prefix: str | None = None,
+        task_source: TaskSourceFactory | None = None,
     ) -> None:
         """``actor_name_prefix`` names the rollout actors (``<prefix>-worker-<slot>-<incarnation>``)
-        so that operators, and the fault tests, can find them in the Ray cluster."""
+        so that operators, and the fault tests, can find them in the Ray cluster. ``task_source``
+        replaces the teacher service in every worker (``WorkerSettings.task_source``); the teacher's
+        URL and curriculum are then unused."""
         torch.set_num_threads(config.ppo.torch_threads)
         self.config = config
         self.run_dir = Path(run_dir)
@@ -79,6 +82,7 @@ class Trainer:
         self.curriculum = curriculum
         self.teacher_token = teacher_token
         self.actor_name_prefix = actor_name_prefix
+        self.task_source = task_source
         self.learner = PPOLearner(policy_spec_for(config.env, config.ppo), config.ppo, config.seed)
         self.counters = Counters()
         if resume_from is not None:
@@ -106,6 +110,7 @@ class Trainer:
             teacher_token=self.teacher_token,
             env_id=self.config.env,
             score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
+            task_source=self.task_source,
         )
         # Resumed runs draw fresh environment seeds instead of replaying the first run's.
         pool_seed = int(np.random.SeedSequence([self.config.seed, self.counters.iteration]).generate_state(1)[0])
