@@ -1,0 +1,297 @@
+"""The service's level kinds beside Syllabus 0.7's on a MiniGrid level family, with the same student.
+
+Every run is ``kuka-curriculum train``'s learner and workers (``learner.core.trainer.Trainer``) on the
+same levels, budget and PPO settings; only where each episode's level comes from changes:
+
+- ours, through a ``serve`` this script starts: ``plr``, robust PLR (``plr`` with ``robust: true``),
+  ``learning-progress``, ``learnability``, and ``random`` (uniform over the training levels);
+- Syllabus's PLR and learning progress, in a Ray actor the workers draw from
+  (``learner.experiments.level_sources``);
+- ``no-curriculum``: uniform levels drawn inside each worker, no service at all, the throughput baseline.
+
+After training, each final policy plays ``--test-levels`` held-out levels (seeds from 1,000,000, outside
+every training set) ``--test-repeats`` times each, sampling its actions. Per run: held-out success and
+return, and the CVaR of success at 10% (the mean success of the worst tenth of held-out levels, as SFL
+reports); per kind, means with 95% Student-t intervals over seeds, and the median training steps/s.
+
+Resumable: a finished run (its ``result.json``) is skipped, an unfinished one resumes from its latest
+checkpoint. Runs go seed by seed (every kind on seed 0, then on seed 1, ...), so a partial table compares
+kinds on the same seeds. Raw files (databases, logs, raw metrics) are git-ignored; ``--summarise`` rewrites
+``results.json`` and ``results.md`` from the runs on disk.
+
+    .venv/bin/python bench/levels_side_by_side.py --out benchmarks/levels-minigrid/doorkey-8x8 \\
+        --env MiniGrid-DoorKey-8x8-v0 --levels 500 --steps 1000000 --seeds 0 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from common.levels import HELD_OUT_FIRST_SEED, LEVEL_ENV_IDS  # noqa: E402
+from learner.core.config import TrainConfig  # noqa: E402
+
+OURS = {
+    "random": ("random", {}),
+    "plr": ("plr", {}),
+    "robust-plr": ("plr", {"robust": True}),
+    "learning-progress": ("learning-progress", {}),
+    "learnability": ("learnability", {}),
+}
+"""Our kinds by their row name: the service's teacher kind and its parameters (defaults otherwise)."""
+SYLLABUS = ("syllabus-plr", "syllabus-learning-progress")
+BASELINE = "no-curriculum"
+KINDS = (
+    "random", "plr", "syllabus-plr", "robust-plr", "learning-progress", "syllabus-learning-progress", "learnability",
+    BASELINE,
+)  # fmt: skip
+"""Each seed's runs in this order, so a partial table holds the main comparisons first."""
+PPO_SETTINGS = {
+    "rollout_length": 128,
+    "gamma": 0.99,
+    "gae_lambda": 0.95,
+    "entropy_coef": 0.01,
+    "minibatch_size": 512,
+    "update_epochs": 4,
+    "learning_rate": 0.0005,
+}
+"""The MiniGrid settings of the docs' example (``docs/commands.md``)."""
+CVAR_SHARE = 0.1
+DEFAULTS = TrainConfig()
+
+
+def run_config(args: argparse.Namespace, kind: str, seed: int) -> TrainConfig:
+    teacher, params = OURS.get(kind, ("random", {}))
+    return replace(
+        DEFAULTS,
+        teacher=teacher,
+        teacher_overrides=params,
+        env=args.env,
+        levels=args.levels,
+        total_steps=args.steps,
+        seed=seed,
+        workers=2,
+        envs_per_worker=8,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        checkpoint_every=25,
+        ppo=DEFAULTS.ppo.with_overrides(PPO_SETTINGS),
+    )
+
+
+def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, teacher_url: str) -> Path:
+    """Train (or resume) one run; returns its final checkpoint."""
+    import ray
+
+    from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+    from learner.core.trainer import Trainer
+    from learner.experiments.level_sources import SyllabusCurriculum, SyllabusLevels, UniformLevels
+    from learner.session import register_curriculum
+
+    config = run_config(args, kind, seed)
+    previous = latest_checkpoint(run_dir)
+    checkpoint = load_checkpoint(previous) if previous is not None else None
+    name = f"{run_dir.parent.parent.name}-{kind}-seed{seed}"[:64]
+    task_source: Any = None
+    syllabus_actor = None
+    if kind in OURS:
+        register_curriculum(teacher_url, name, config, None)
+    elif kind == BASELINE:
+        task_source = UniformLevels(args.levels)
+    else:
+        # A resumed Syllabus run starts its curriculum afresh: Syllabus has no saved state to restore.
+        syllabus_actor = SyllabusCurriculum.options(name=name).remote(kind, args.levels, seed)  # type: ignore[attr-defined]
+        task_source = SyllabusLevels(name)
+    trainer = Trainer(config, run_dir, teacher_url, name, resume_from=checkpoint, task_source=task_source)
+    started = time.monotonic()
+    final = trainer.run(
+        lambda report: print(
+            f"\r{kind} seed {seed}: {report.counters.steps:_} steps, recent success {report.recent_success_rate:.0%}",
+            end="",
+            flush=True,
+        )
+    )
+    print(f"  ({time.monotonic() - started:.0f} s)")
+    if syllabus_actor is not None:
+        ray.kill(syllabus_actor)
+    return final
+
+
+def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
+    """The final policy on held-out levels, each played ``test_repeats`` times."""
+    from learner.core.checkpoint import load_checkpoint
+    from learner.core.kuka_policy import policy_spec_for
+    from learner.core.ppo import PPOLearner
+    from learner.experiments.level_sources import UniformLevels
+    from rollout_worker.actor import WorkerSettings
+    from rollout_worker.pool import WorkerPool
+
+    checkpoint = load_checkpoint(final)
+    learner = PPOLearner(policy_spec_for(checkpoint.config.env, checkpoint.config.ppo), checkpoint.config.ppo, 0)
+    learner.load_state_dict(checkpoint.learner)
+    settings = WorkerSettings(
+        teacher_url="",
+        curriculum="",
+        num_envs=1,
+        rollout_length=1,
+        max_episode_steps=checkpoint.config.max_episode_steps,
+        env_id=checkpoint.config.env,
+        task_source=UniformLevels(args.levels),
+    )
+    levels = [HELD_OUT_FIRST_SEED + index for index in range(args.test_levels)]
+    seeds = [level for level in levels for _ in range(args.test_repeats)]
+    pool = WorkerPool(settings, 2, seed=checkpoint.config.seed)
+    try:
+        shares = pool.start_evaluation(learner.snapshot(), {}, seeds).result()
+    finally:
+        pool.close()
+    by_level: dict[int, list[bool]] = {}
+    returns = []
+    for slot, share in enumerate(shares):  # slot k played seeds[k::pool size], in order
+        for level, episode in zip(seeds[slot :: len(shares)], share, strict=True):
+            by_level.setdefault(level, []).append(episode.success)
+            returns.append(episode.reward)
+    per_level = np.array([np.mean(by_level[level]) for level in levels])
+    worst = np.sort(per_level)[: max(1, int(round(CVAR_SHARE * len(per_level))))]
+    return {
+        "success": float(per_level.mean()),
+        "return": float(np.mean(returns)),
+        "cvar10_success": float(worst.mean()),
+        "per_level_success": [round(float(value), 4) for value in per_level],
+        "episodes": len(returns),
+    }
+
+
+def run_all(args: argparse.Namespace) -> None:
+    from learner.experiments.run_archive import archive_run
+    from learner.session import connect_ray
+    from learner.teacher_process import launch_local_teacher_service
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with contextlib.ExitStack() as stack:
+        teacher_url = launch_local_teacher_service(out / "service", stack)()
+        connect_ray(None, 2, stack)
+        for seed in args.seeds:
+            for kind in args.kinds:
+                run_dir = out / "runs" / f"{kind}-seed{seed}"
+                result_path = run_dir / "result.json"
+                if result_path.exists():
+                    continue
+                run_dir.mkdir(parents=True, exist_ok=True)
+                final = train_one(args, kind, seed, run_dir, teacher_url)
+                tested = test_one(args, final)
+                print(f"{kind} seed {seed}: held-out {tested['success']:.1%}, CVaR10 {tested['cvar10_success']:.1%}")
+                result = {"kind": kind, "seed": seed, "final_checkpoint": final.name, **tested}
+                result_path.write_text(json.dumps(result, indent=1) + "\n")
+                archive_run(run_dir)
+                summarise(args)
+
+
+def summarise(args: argparse.Namespace) -> None:
+    from learner.experiments.run_archive import metrics_records
+    from learner.stats import mean_interval
+
+    out = Path(args.out)
+    rows: dict[str, Any] = {}
+    curves: dict[str, list[dict[str, Any]]] = {}
+    for kind in KINDS:
+        runs = []
+        for result_path in sorted((out / "runs").glob(f"{kind}-seed*/result.json")):
+            result = json.loads(result_path.read_text())
+            records = metrics_records(result_path.parent)
+            speeds = [r["perf/steps_per_second"] for r in records if "perf/steps_per_second" in r]
+            result["steps_per_second"] = float(np.median(speeds)) if speeds else None
+            runs.append(result)
+            curves.setdefault(kind, []).append(
+                {
+                    "seed": result["seed"],
+                    "steps": [r["step"] for r in records if "eval/success_rate" in r],
+                    "success": [r["eval/success_rate"] for r in records if "eval/success_rate" in r],
+                }
+            )
+        if not runs:
+            continue
+        rows[kind] = {
+            "seeds": [run["seed"] for run in runs],
+            **{
+                measure: mean_interval([run[measure] for run in runs]).to_dict()
+                for measure in ("success", "return", "cvar10_success")
+            },
+            "steps_per_second_median": float(np.median([run["steps_per_second"] or np.nan for run in runs])),
+            "runs": [{key: value for key, value in run.items() if key != "per_level_success"} for run in runs],
+        }
+    results = {
+        "env": args.env,
+        "levels": args.levels,
+        "steps": args.steps,
+        "test_levels": args.test_levels,
+        "test_repeats": args.test_repeats,
+        "ppo": PPO_SETTINGS,
+        "kinds": rows,
+        "curves": curves,
+    }
+    (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
+    (out / "results.md").write_text(results_table(results))
+
+
+def _interval(cell: dict[str, Any], scale: float = 100.0) -> str:
+    estimate = cell["estimate"] * scale
+    if cell["low"] is None:
+        return f"{estimate:.1f}"
+    return f"{estimate:.1f} [{cell['low'] * scale:.1f}, {cell['high'] * scale:.1f}]"
+
+
+def results_table(results: dict[str, Any]) -> str:
+    baseline = results["kinds"].get(BASELINE, {}).get("steps_per_second_median")
+    lines = [
+        f"# {results['env']}, {results['levels']} training levels, {results['steps']:,} steps",
+        "",
+        f"Held-out: {results['test_levels']} levels x {results['test_repeats']} episodes; 95% intervals over seeds.",
+        "",
+        "| kind | seeds | held-out success % | return | CVaR10 success % | steps/s (median) | vs no curriculum |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for kind, row in results["kinds"].items():
+        speed = row["steps_per_second_median"]
+        ratio = f"{speed / baseline:.2f}" if baseline else "-"
+        lines.append(
+            f"| {kind} | {len(row['seeds'])} | {_interval(row['success'])} | {_interval(row['return'], 1.0)} | "
+            f"{_interval(row['cvar10_success'])} | {speed:,.0f} | {ratio} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", required=True, help="where the runs and results go")
+    parser.add_argument("--env", default="MiniGrid-DoorKey-8x8-v0", choices=LEVEL_ENV_IDS)
+    parser.add_argument("--levels", type=int, default=500, help="training levels (reset seeds 0 to N-1)")
+    parser.add_argument("--steps", type=int, default=1_000_000, help="training steps per run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--kinds", nargs="+", default=list(KINDS), choices=KINDS)
+    parser.add_argument("--eval-every", type=int, default=25, help="iterations between in-run held-out evaluations")
+    parser.add_argument("--eval-episodes", type=int, default=50, help="held-out levels per in-run evaluation")
+    parser.add_argument("--test-levels", type=int, default=100, help="held-out levels of the final test")
+    parser.add_argument("--test-repeats", type=int, default=5, help="episodes per held-out level in the final test")
+    parser.add_argument("--summarise", action="store_true", help="only rewrite results.json and results.md")
+    args = parser.parse_args()
+    if args.summarise:
+        summarise(args)
+    else:
+        run_all(args)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
