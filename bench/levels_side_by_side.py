@@ -67,6 +67,8 @@ PPO_SETTINGS = {
 }
 """The MiniGrid settings of the docs' example (``docs/commands.md``)."""
 CVAR_SHARE = 0.1
+WARM_UP_ITERATIONS = 5
+"""Iterations at a run's start left out of its steps/s: Ray and the workers are still starting."""
 DEFAULTS = TrainConfig()
 
 
@@ -172,6 +174,48 @@ def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
     }
 
 
+def measure_throughput(args: argparse.Namespace) -> None:
+    """Each kind's training steps/s on short runs with no evaluation, kinds interleaved over ``--rounds``
+    rounds so drift on the machine spreads over all of them; the median over a run's iterations after its
+    first ``WARM_UP_ITERATIONS``. Run on a quiet machine."""
+    import shutil
+
+    from learner.experiments.run_archive import metrics_records
+    from learner.session import connect_ray
+    from learner.teacher_process import launch_local_teacher_service
+
+    out = Path(args.out) / "throughput"
+    shutil.rmtree(out, ignore_errors=True)
+    measured: dict[str, list[float]] = {}
+    timed = argparse.Namespace(**{**vars(args), "steps": args.throughput_steps, "eval_every": 0})
+    with contextlib.ExitStack() as stack:
+        teacher_url = launch_local_teacher_service(out / "service", stack)()
+        connect_ray(None, 2, stack)
+        for round_ in range(args.rounds):
+            for kind in args.kinds:
+                run_dir = out / "runs" / f"{kind}-round{round_}"
+                run_dir.mkdir(parents=True)
+                train_one(timed, kind, 0, run_dir, teacher_url)
+                speeds = [r["perf/steps_per_second"] for r in metrics_records(run_dir) if "perf/steps_per_second" in r]
+                measured.setdefault(kind, []).append(float(np.median(speeds[WARM_UP_ITERATIONS:])))
+                print(f"{kind} round {round_}: {measured[kind][-1]:,.0f} steps/s")
+    baseline = float(np.median(measured[BASELINE])) if BASELINE in measured else None
+    throughput = {
+        "steps_per_run": args.throughput_steps,
+        "rounds": args.rounds,
+        "kinds": {
+            kind: {
+                "steps_per_second": values,
+                "median": float(np.median(values)),
+                "vs_no_curriculum": float(np.median(values)) / baseline if baseline else None,
+            }
+            for kind, values in measured.items()
+        },
+    }
+    (Path(args.out) / "throughput.json").write_text(json.dumps(throughput, indent=1) + "\n")
+    shutil.rmtree(out / "runs")
+
+
 def run_all(args: argparse.Namespace) -> None:
     from learner.experiments.run_archive import archive_run
     from learner.session import connect_ray
@@ -192,7 +236,14 @@ def run_all(args: argparse.Namespace) -> None:
                 final = train_one(args, kind, seed, run_dir, teacher_url)
                 tested = test_one(args, final)
                 print(f"{kind} seed {seed}: held-out {tested['success']:.1%}, CVaR10 {tested['cvar10_success']:.1%}")
-                result = {"kind": kind, "seed": seed, "final_checkpoint": final.name, **tested}
+                result = {
+                    "kind": kind,
+                    "seed": seed,
+                    "final_checkpoint": final.name,
+                    "test_levels": args.test_levels,
+                    "test_repeats": args.test_repeats,
+                    **tested,
+                }
                 result_path.write_text(json.dumps(result, indent=1) + "\n")
                 archive_run(run_dir)
                 summarise(args)
@@ -241,8 +292,38 @@ def summarise(args: argparse.Namespace) -> None:
         "kinds": rows,
         "curves": curves,
     }
+    throughput_path = out / "throughput.json"
+    if throughput_path.exists():
+        results["throughput"] = json.loads(throughput_path.read_text())
     (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     (out / "results.md").write_text(results_table(results))
+    plot_curves(results, out / "learning_curves.png")
+
+
+def plot_curves(results: dict[str, Any], path: Path) -> None:
+    """Held-out success during training, each kind's mean over its seeds (on the steps all of them reached)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(figsize=(8, 4.5))
+    for kind, runs in results["curves"].items():
+        length = min(len(run["steps"]) for run in runs)
+        if length == 0:
+            continue
+        steps = np.array(runs[0]["steps"][:length])
+        success = np.mean([run["success"][:length] for run in runs], axis=0)
+        style = "--" if kind.startswith("syllabus") else ":" if kind == BASELINE else "-"
+        axes.plot(steps, 100 * success, style, label=f"{kind} ({len(runs)} seeds)")
+    axes.set_xlabel("training steps")
+    axes.set_ylabel("held-out success % (in-run evaluations)")
+    axes.set_title(f"{results['env']}, {results['levels']} training levels")
+    axes.grid(alpha=0.3)
+    axes.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
 
 
 def _interval(cell: dict[str, Any], scale: float = 100.0) -> str:
@@ -269,6 +350,23 @@ def results_table(results: dict[str, Any]) -> str:
             f"| {kind} | {len(row['seeds'])} | {_interval(row['success'])} | {_interval(row['return'], 1.0)} | "
             f"{_interval(row['cvar10_success'])} | {speed:,.0f} | {ratio} |"
         )
+    throughput = results.get("throughput")
+    if throughput:
+        lines += [
+            "",
+            f"Throughput: {throughput['steps_per_run']:,}-step runs, no evaluation, kinds interleaved over "
+            f"{throughput['rounds']} rounds; median training steps/s.",
+            "",
+            "| kind | steps/s | vs no curriculum |",
+            "|---|---|---|",
+        ]
+        for kind, row in throughput["kinds"].items():
+            ratio = row["vs_no_curriculum"]
+            lines.append(
+                f"| {kind} | {row['median']:,.0f} | {ratio:.2f} |"
+                if ratio
+                else f"| {kind} | {row['median']:,.0f} | - |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -285,8 +383,16 @@ def main() -> int:
     parser.add_argument("--test-levels", type=int, default=100, help="held-out levels of the final test")
     parser.add_argument("--test-repeats", type=int, default=5, help="episodes per held-out level in the final test")
     parser.add_argument("--summarise", action="store_true", help="only rewrite results.json and results.md")
+    parser.add_argument(
+        "--throughput", action="store_true", help="measure each kind's steps/s on short runs instead (a quiet machine)"
+    )
+    parser.add_argument("--throughput-steps", type=int, default=150_000, help="steps per throughput run")
+    parser.add_argument("--rounds", type=int, default=2, help="throughput rounds over every kind")
     args = parser.parse_args()
-    if args.summarise:
+    if args.throughput:
+        measure_throughput(args)
+        summarise(args)
+    elif args.summarise:
         summarise(args)
     else:
         run_all(args)
