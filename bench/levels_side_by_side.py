@@ -67,6 +67,8 @@ PPO_SETTINGS = {
 }
 """The MiniGrid settings of the docs' example (``docs/commands.md``)."""
 CVAR_SHARE = 0.1
+CURVE_TARGET = 0.8
+"""In-run held-out success whose first crossing is a run's steps to master the family."""
 WARM_UP_ITERATIONS = 5
 """Iterations at a run's start left out of its steps/s: Ray and the workers are still starting."""
 DEFAULTS = TrainConfig()
@@ -263,6 +265,9 @@ def summarise(args: argparse.Namespace) -> None:
             records = metrics_records(result_path.parent)
             speeds = [r["perf/steps_per_second"] for r in records if "perf/steps_per_second" in r]
             result["steps_per_second"] = float(np.median(speeds)) if speeds else None
+            result["steps_to_80"] = next(
+                (r["step"] for r in records if r.get("eval/success_rate", 0.0) >= CURVE_TARGET), None
+            )
             runs.append(result)
             curves.setdefault(kind, []).append(
                 {
@@ -280,6 +285,7 @@ def summarise(args: argparse.Namespace) -> None:
                 for measure in ("success", "return", "cvar10_success")
             },
             "steps_per_second_median": float(np.median([run["steps_per_second"] or np.nan for run in runs])),
+            "median_steps_to_80": _median_or_none([run["steps_to_80"] for run in runs]),
             "runs": [{key: value for key, value in run.items() if key != "per_level_success"} for run in runs],
         }
     results = {
@@ -326,6 +332,13 @@ def plot_curves(results: dict[str, Any], path: Path) -> None:
     plt.close(figure)
 
 
+def _median_or_none(steps: list[int | None]) -> float | None:
+    """The median, counting a run that never got there as later than every one that did (None: over half never did)."""
+    ordered = sorted(steps, key=lambda value: (value is None, value or 0))
+    middle = ordered[(len(ordered) - 1) // 2 : len(ordered) // 2 + 1]
+    return None if None in middle else float(np.mean([value for value in middle if value is not None]))
+
+
 def _interval(cell: dict[str, Any], scale: float = 100.0) -> str:
     estimate = cell["estimate"] * scale
     if cell["low"] is None:
@@ -333,40 +346,51 @@ def _interval(cell: dict[str, Any], scale: float = 100.0) -> str:
     return f"{estimate:.1f} [{cell['low'] * scale:.1f}, {cell['high'] * scale:.1f}]"
 
 
+def markdown_table(headers: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    return lines + ["| " + " | ".join(row) + " |" for row in rows]
+
+
 def results_table(results: dict[str, Any]) -> str:
     baseline = results["kinds"].get(BASELINE, {}).get("steps_per_second_median")
+    rows = [
+        [
+            kind,
+            str(len(row["seeds"])),
+            _interval(row["success"]),
+            _interval(row["return"], 1.0),
+            _interval(row["cvar10_success"]),
+            f"{row['steps_per_second_median']:,.0f}",
+            f"{row['steps_per_second_median'] / baseline:.2f}" if baseline else "-",
+            f"{row['median_steps_to_80']:,.0f}" if row["median_steps_to_80"] is not None else "not reached",
+        ]
+        for kind, row in results["kinds"].items()
+    ]
     lines = [
         f"# {results['env']}, {results['levels']} training levels, {results['steps']:,} steps",
         "",
-        f"Held-out: {results['test_levels']} levels x {results['test_repeats']} episodes; 95% intervals over seeds.",
+        f"Held-out: {results['test_levels']} levels x {results['test_repeats']} episodes; 95% intervals over seeds; "
+        "steps/s is the median of the runs' median training steps/s; steps to 80% is the median over seeds of the "
+        "first in-run evaluation at 80% held-out success or more.",
         "",
-        "| kind | seeds | held-out success % | return | CVaR10 success % | steps/s (median) | vs no curriculum |",
-        "|---|---|---|---|---|---|---|",
+        *markdown_table(
+            ["kind", "seeds", "held-out success %", "return", "CVaR10 success %", "steps/s", "vs none", "steps to 80%"],
+            rows,
+        ),
     ]
-    for kind, row in results["kinds"].items():
-        speed = row["steps_per_second_median"]
-        ratio = f"{speed / baseline:.2f}" if baseline else "-"
-        lines.append(
-            f"| {kind} | {len(row['seeds'])} | {_interval(row['success'])} | {_interval(row['return'], 1.0)} | "
-            f"{_interval(row['cvar10_success'])} | {speed:,.0f} | {ratio} |"
-        )
     throughput = results.get("throughput")
     if throughput:
+        speeds = [
+            [kind, f"{row['median']:,.0f}", f"{row['vs_no_curriculum']:.2f}" if row["vs_no_curriculum"] else "-"]
+            for kind, row in throughput["kinds"].items()
+        ]
         lines += [
             "",
             f"Throughput: {throughput['steps_per_run']:,}-step runs, no evaluation, kinds interleaved over "
             f"{throughput['rounds']} rounds; median training steps/s.",
             "",
-            "| kind | steps/s | vs no curriculum |",
-            "|---|---|---|",
+            *markdown_table(["kind", "steps/s", "vs no curriculum"], speeds),
         ]
-        for kind, row in throughput["kinds"].items():
-            ratio = row["vs_no_curriculum"]
-            lines.append(
-                f"| {kind} | {row['median']:,.0f} | {ratio:.2f} |"
-                if ratio
-                else f"| {kind} | {row['median']:,.0f} | - |"
-            )
     return "\n".join(lines) + "\n"
 
 
