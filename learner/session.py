@@ -10,6 +10,7 @@ import os
 import re
 import socket
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,9 @@ RAY_NAMESPACE = "kuka-curriculum"
 PUBLIC_URL_VARIABLE = "KC_PUBLIC_URL"
 """The teacher's address as a person's browser reaches it, when it differs from ``--teacher-url``
 (in Docker Compose the learner reaches ``http://teacher:8000``, the host ``http://127.0.0.1:8000``)."""
+RAY_WATCH_INTERVAL_S = 10.0
+RAY_LOST_EXIT_CODE = 75
+"""EX_TEMPFAIL: the job lost its Ray cluster; a restart (compose's ``restart: on-failure``) resumes it."""
 RAY_AUTH_MODE_VARIABLE = "RAY_AUTH_MODE"
 """Unset, Ray turns token authentication on for a new local cluster and warns that it chose so; set to
 Ray's own choice before Ray is imported (it reads the mode once), it keeps that and drops the warning."""
@@ -126,6 +130,43 @@ def connect_ray(address: str | None, min_cpus: int, stack: contextlib.ExitStack)
     except (ConnectionError, RuntimeError, ValueError) as error:
         raise UsageError(f"cannot connect to Ray at {address or 'a new local cluster'}: {error}") from None
     stack.callback(ray.shutdown)
+    if address is not None:
+        stack.callback(watch_ray_cluster(ray.get_runtime_context().get_node_id(), ray.nodes).set)
+
+
+def watch_ray_cluster(
+    node_id: str, nodes: Callable[[], list[dict[str, Any]]], interval_s: float = RAY_WATCH_INTERVAL_S
+) -> threading.Event:
+    """End the process with ``RAY_LOST_EXIT_CODE`` once the joined cluster stops counting this
+    driver's node alive (or cannot say, twice in a row); returns the event that stops the watch.
+
+    A Ray head killed and restarted under a training job (Docker's restart policy does this, as
+    ``bench/chaos.py`` found) comes back as a new cluster that knows none of the job's actors or its
+    node: the driver's waits on its rollout actors then never end, and its container stays up, so
+    nothing restarts it. Exiting instead lets compose's ``restart: on-failure`` start it again and
+    ``--resume-if-exists`` carry on from the last checkpoint."""
+    stop = threading.Event()
+
+    def watch() -> None:
+        doubts = 0
+        while not stop.wait(interval_s):
+            try:
+                alive = any(node.get("NodeID") == node_id and node.get("Alive") for node in nodes())
+                reason = "the cluster no longer counts this node alive (was its head restarted?)"
+            except Exception as error:  # the head away: Ray's calls raise
+                alive, reason = False, f"{type(error).__name__}: {error}"
+            doubts = 0 if alive else doubts + 1
+            if doubts >= 2 and not stop.is_set():
+                print(
+                    f"lost the Ray cluster: {reason}; exiting with {RAY_LOST_EXIT_CODE} so that a restart "
+                    "resumes from the last checkpoint",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                os._exit(RAY_LOST_EXIT_CODE)
+
+    threading.Thread(target=watch, name="ray-cluster-watch", daemon=True).start()
+    return stop
 
 
 def curriculum_name(run_dir: Path) -> str:
