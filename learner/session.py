@@ -144,7 +144,10 @@ def watch_ray_cluster(
     ``bench/chaos.py`` found) comes back as a new cluster that knows none of the job's actors or its
     node: the driver's waits on its rollout actors then never end, and its container stays up, so
     nothing restarts it. Exiting instead lets compose's ``restart: on-failure`` start it again and
-    ``--resume-if-exists`` carry on from the last checkpoint."""
+    ``--resume-if-exists`` carry on from the last checkpoint. While the old head's address answers
+    nothing, Ray itself may abort the process inside ``ray.nodes()`` (a failed check in its
+    ``GetAllNodeInfo``, seen in the chaos bench) before the second check: the process still ends
+    non-zero, which is what the restart needs."""
     stop = threading.Event()
 
     def watch() -> None:
