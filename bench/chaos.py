@@ -530,6 +530,26 @@ def steps_lost(starts: list[dict[str, Any]], records: list[dict[str, Any]]) -> l
     return deaths
 
 
+def restarts_by_cause(faults: list[dict[str, Any]], timeline: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
+    """Restarts by the restart policy (the learner's, the Ray workers'), each counted against the
+    last fault done before it was seen, by that fault's role; a kill's restart of its own container
+    is left out, so what remains is what the fault took down with it (a head's death takes the
+    nodes and the learner). Finer than the per-fault windows, which overlap when faults come often."""
+    done = sorted((f for f in faults if f["done"]), key=lambda f: f["started"])
+    caused = {role: {"learner": 0, "ray-worker": 0} for role in ROLES}
+    for before, after in zip(timeline, timeline[1:], strict=False):
+        earlier = [f for f in done if f["started"] <= after["t"]]
+        if not earlier:
+            continue
+        cause = earlier[-1]
+        for service, key in (("learner", "learner_restarts"), ("ray-worker", "worker_restarts")):
+            caused[cause["role"]][service] += max(0, after.get(key, 0) - before.get(key, 0))
+    for fault in done:
+        if fault["kind"] == "kill" and fault["role"] in ("learner", "ray-worker"):
+            caused[fault["role"]][fault["role"]] -= 1
+    return caused
+
+
 def memory_gib() -> int:
     return round(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2**30)
 
@@ -689,6 +709,7 @@ def main(argv: list[str] | None = None) -> int:
         deaths = steps_lost(learner_starts(learner_log), records)
         report.update(evaluate(args, faults, disk, results, replayed, deaths, records, states, learner_log, final))
         report["timeline_samples"] = len(observer.timeline)
+        report["restarts_by_cause"] = restarts_by_cause(report["faults"], observer.timeline)
         if args.artifacts:
             args.artifacts.mkdir(parents=True, exist_ok=True)
             shutil.copy(database, args.artifacts / "teacher-copy.sqlite3")
@@ -829,6 +850,9 @@ def print_report(report: dict[str, Any]) -> None:
               f"{seconds(back['median']):>8} / {seconds(back['worst']):<8}      "
               f"{seconds(regained['median']):>8} / {seconds(regained['worst']):<8}                 "
               f"{row['learner_restarts_after']} / {row['worker_restarts_after']}")  # fmt: skip
+    for role, caused in report.get("restarts_by_cause", {}).items():
+        print(f"after {role} faults the restart policy also restarted the learner {caused['learner']} times, "
+              f"a Ray worker {caused['ray-worker']} times")  # fmt: skip
     for death in report["learner_deaths"]:
         print(f"learner restart: last step logged {death['last_step_logged']:,}, resumed from "
               f"{death['resumed_from']:,}: {death['steps_lost']:,} steps lost")  # fmt: skip
