@@ -265,8 +265,10 @@ def summarise(args: argparse.Namespace) -> None:
             records = metrics_records(result_path.parent)
             speeds = [r["perf/steps_per_second"] for r in records if "perf/steps_per_second" in r]
             result["steps_per_second"] = float(np.median(speeds)) if speeds else None
-            result["steps_to_80"] = next(
-                (r["step"] for r in records if r.get("eval/success_rate", 0.0) >= CURVE_TARGET), None
+            evaluations = [(r["step"], r["eval/success_rate"]) for r in records if "eval/success_rate" in r]
+            result["steps_to_80"] = next((step for step, success in evaluations if success >= CURVE_TARGET), None)
+            result["midway_success"] = next(
+                (success for step, success in reversed(evaluations) if step <= args.steps // 2), 0.0
             )
             runs.append(result)
             curves.setdefault(kind, []).append(
@@ -282,7 +284,7 @@ def summarise(args: argparse.Namespace) -> None:
             "seeds": [run["seed"] for run in runs],
             **{
                 measure: mean_interval([run[measure] for run in runs]).to_dict()
-                for measure in ("success", "return", "cvar10_success")
+                for measure in ("success", "return", "cvar10_success", "midway_success")
             },
             "steps_per_second_median": float(np.median([run["steps_per_second"] or np.nan for run in runs])),
             "median_steps_to_80": _median_or_none([run["steps_to_80"] for run in runs]),
@@ -360,6 +362,7 @@ def results_table(results: dict[str, Any]) -> str:
             _interval(row["success"]),
             _interval(row["return"], 1.0),
             _interval(row["cvar10_success"]),
+            _interval(row["midway_success"]),
             f"{row['steps_per_second_median']:,.0f}",
             f"{row['steps_per_second_median'] / baseline:.2f}" if baseline else "-",
             f"{row['median_steps_to_80']:,.0f}" if row["median_steps_to_80"] is not None else "not reached",
@@ -371,10 +374,11 @@ def results_table(results: dict[str, Any]) -> str:
         "",
         f"Held-out: {results['test_levels']} levels x {results['test_repeats']} episodes; 95% intervals over seeds; "
         "steps/s is the median of the runs' median training steps/s; steps to 80% is the median over seeds of the "
-        "first in-run evaluation at 80% held-out success or more.",
+        "first in-run evaluation at 80% held-out success or more; halfway is the in-run held-out success at half the "
+        "budget.",
         "",
         *markdown_table(
-            ["kind", "seeds", "held-out success %", "return", "CVaR10 success %", "steps/s", "vs none", "steps to 80%"],
+            ["kind", "seeds", "held-out %", "return", "CVaR10 %", "halfway %", "steps/s", "vs none", "steps to 80%"],
             rows,
         ),
     ]
