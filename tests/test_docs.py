@@ -34,6 +34,7 @@ RESULTS_PAGES = {
     "bakeoff-hard",
     "bakeoff-v0",
     "tune",
+    "levels",
 }
 BENCHMARKS_MOST_LINES = 300
 HEADING_MOST_CHARACTERS = 120
