@@ -134,15 +134,12 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
 def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
     """The final policy on held-out levels, each played ``test_repeats`` times."""
     from learner.core.checkpoint import load_checkpoint
-    from learner.core.kuka_policy import policy_spec_for
-    from learner.core.ppo import PPOLearner
+    from learner.core.kuka_policy import policy_snapshot
     from learner.experiments.level_sources import UniformLevels
     from rollout_worker.actor import WorkerSettings
     from rollout_worker.pool import WorkerPool
 
     checkpoint = load_checkpoint(final)
-    learner = PPOLearner(policy_spec_for(checkpoint.config.env, checkpoint.config.ppo), checkpoint.config.ppo, 0)
-    learner.load_state_dict(checkpoint.learner)
     settings = WorkerSettings(
         teacher_url="",
         curriculum="",
@@ -156,7 +153,7 @@ def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
     seeds = [level for level in levels for _ in range(args.test_repeats)]
     pool = WorkerPool(settings, 2, seed=checkpoint.config.seed)
     try:
-        shares = pool.start_evaluation(learner.snapshot(), {}, seeds).result()
+        shares = pool.start_evaluation(policy_snapshot(checkpoint), {}, seeds).result()
     finally:
         pool.close()
     by_level: dict[int, list[bool]] = {}
