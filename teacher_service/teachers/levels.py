@@ -197,8 +197,9 @@ class LearningProgressTeacher(_LevelTeacher):
 
     A result's success is its ``success`` when it carries one, else whether its return is above 0.
     Departures from Syllabus 0.7's ``OnlineLearningProgress``: levels not played since the last update
-    keep their averages (Syllabus folds a rate of 0 into them); success rates are not normalised by a
-    first-round random baseline; draws are indexed by task number.
+    keep their averages (Syllabus folds a rate of 0 into them); draws are indexed by task number. As
+    Syllabus does, the first update sets each level's baseline (its success rate then) and later
+    rates count above it.
     """
 
     kind = "learning-progress"
@@ -228,6 +229,7 @@ class LearningProgressTeacher(_LevelTeacher):
         sampler = self.sampler
         return {
             "updates_pending": int(sampler.episodes.sum()),
-            "levels_played": int(sampler.started.sum()),
+            "updates": sampler.updates,
+            "levels_with_success": int((sampler.true_rate > 0).sum()),
             **self._level_table({"progress": sampler.progress(), "fast": sampler.fast, "slow": sampler.slow}),
         }

@@ -171,19 +171,26 @@ class LearningProgress:
     computes it: per level a fast and a slow moving average of the success rate, and a level's
     progress the gap between them after the reweighting that stretches rates near 0 and 1.
 
-    Outcomes gather between updates; every update folds each level's success rate since the last one
-    into the averages, the first straight in. Only the levels played since then move (Syllabus folds
+    Outcomes gather between updates. The first update measures the untrained student: each level's
+    success rate then, capped at 0.75 so that no level is written off, is its baseline, and every
+    average starts at 0. Each later update folds each played level's rate above its baseline,
+    ``max(rate - baseline, 0) / (1 - baseline)``, into its averages, so a level's first successes
+    open a gap between them at once. Only the levels played since the last update move (Syllabus folds
     a rate of 0 into every level not played, which drags their averages down). Sampling: the levels
     with progress (or a success seen) get z-scored progress through a sigmoid, the rest nothing; that
     distribution is mixed with a ``uniform_share`` of uniform draws over all levels.
     """
 
     UNIFORMS_PER_DRAW = 1
+    BASELINE_CAP = 0.75
+    """The highest baseline a level gets, as Syllabus caps it: a level the untrained student already
+    passes still has room to show progress."""
     state_fields: ClassVar[tuple[StateField, ...]] = (
         StateField("fast", ARRAY),
         StateField("slow", ARRAY),
         StateField("true_rate", ARRAY),
-        StateField("started", ARRAY),
+        StateField("baseline", ARRAY),
+        StateField("updates", INT),
         StateField("successes", ARRAY),
         StateField("episodes", ARRAY),
     )
@@ -196,7 +203,10 @@ class LearningProgress:
         self.fast = np.zeros(levels)
         self.slow = np.zeros(levels)
         self.true_rate = np.zeros(levels)
-        self.started = np.zeros(levels, dtype=bool)
+        """Each level's success rate, averaged the same way but neither normalised nor reweighted: a
+        level with any success seen stays among those sampled by progress."""
+        self.baseline = np.zeros(levels)
+        self.updates = 0
         self.successes = np.zeros(levels)
         self.episodes = np.zeros(levels, dtype=np.int64)
         self._distribution: np.ndarray | None = None
@@ -211,19 +221,22 @@ class LearningProgress:
         self.episodes[level] += 1
 
     def update(self) -> None:
-        """Fold the success rates since the last update into the moving averages."""
+        """Fold the success rates since the last update into the moving averages (the first update
+        sets the baselines instead)."""
         played = self.episodes > 0
         rate = np.zeros(self.levels)
         rate[played] = self.successes[played] / self.episodes[played]
-        first = played & ~self.started
-        again = played & self.started
-        self.fast[first] = self.slow[first] = self.true_rate[first] = rate[first]
-        alpha = self.ema_rate
-        self.fast[again] = alpha * rate[again] + (1 - alpha) * self.fast[again]
-        # As Syllabus does: the slow average moves toward the new fast one, not toward the rate itself.
-        self.slow[again] = alpha * self.fast[again] + (1 - alpha) * self.slow[again]
-        self.true_rate[again] = alpha * rate[again] + (1 - alpha) * self.true_rate[again]
-        self.started |= played
+        if self.updates == 0:
+            self.baseline = np.minimum(rate, self.BASELINE_CAP)
+            self.true_rate = rate
+        else:
+            above = np.maximum(rate - self.baseline, 0.0) / (1.0 - self.baseline)
+            alpha = self.ema_rate
+            self.fast[played] = alpha * above[played] + (1 - alpha) * self.fast[played]
+            # As Syllabus does: the slow average moves toward the new fast one, not toward the rate itself.
+            self.slow[played] = alpha * self.fast[played] + (1 - alpha) * self.slow[played]
+            self.true_rate[played] = alpha * rate[played] + (1 - alpha) * self.true_rate[played]
+        self.updates += 1
         self.successes[:] = 0.0
         self.episodes[:] = 0
         self._distribution = None

@@ -144,7 +144,7 @@ def test_a_restored_teacher_is_the_same_teacher(kind: str) -> None:
         "riac": ("splits", 2),
         "learnability": ("refreshes", 3),
         "plr": ("scored_levels", 50),
-        "learning-progress": ("levels_played", 30),
+        "learning-progress": ("updates", 10),
     }
     if kind in learned:
         entry, least = learned[kind]

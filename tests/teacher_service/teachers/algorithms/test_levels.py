@@ -109,13 +109,31 @@ def test_learning_progress_starts_uniform_and_moves_its_averages_per_update() ->
         lp.record(0, success)
     lp.record(1, 0)
     lp.update()
-    assert lp.fast[0] == lp.slow[0] == 0.75, "a level's first rate starts both averages"
+    assert lp.fast[0] == lp.slow[0] == 0.0, "the first update measures the baseline; every average starts at 0"
+    assert lp.true_rate[0] == 0.75
+    for success in (1, 1):
+        lp.record(0, success)
+    lp.record(1, 1)
+    lp.update()
+    assert lp.fast[0] == pytest.approx(0.5), "the rate above the baseline: (1 - 0.75) / (1 - 0.75), folded at 0.5"
+    assert lp.slow[0] == pytest.approx(0.25), "the slow average follows the fast one"
+    assert lp.fast[1] == pytest.approx(0.5), "a level that starts to succeed opens a gap at once"
+    unplayed = "a level without episodes since the last update keeps its averages"
+    assert lp.fast[2] == 0.0 and lp.true_rate[2] == 0.0, unplayed
+    assert lp.progress()[0] == pytest.approx(abs(reweight(0.5) - reweight(0.25)))
     lp.record(0, 0)
     lp.update()
-    assert lp.fast[0] == pytest.approx(0.375)
-    assert lp.slow[0] == pytest.approx(0.5 * 0.375 + 0.5 * 0.75), "the slow average follows the fast one"
-    assert lp.fast[1] == 0.0 and lp.started[1], "a level without episodes since the last update keeps its averages"
-    assert lp.progress()[0] == pytest.approx(abs(reweight(0.375) - reweight(0.5625)))
+    assert lp.fast[0] == pytest.approx(0.25), "a rate below the baseline counts as 0"
+
+
+def test_learning_progress_caps_the_baseline_so_a_passed_level_can_still_progress() -> None:
+    lp = LearningProgress(1, ema_rate=1.0, reweight_theta=0.1, uniform_share=0.0)
+    lp.record(0, 1)
+    lp.update()
+    assert lp.baseline[0] == LearningProgress.BASELINE_CAP
+    lp.record(0, 1)
+    lp.update()
+    assert lp.fast[0] == 1.0
 
 
 def test_learning_progress_samples_active_levels_by_sigmoid_of_z_scored_progress() -> None:
