@@ -104,8 +104,11 @@ class PlrParams(TeacherParams):
     """How the replay probability grows (see ``replay_prob``); null means ``proportionate`` (the
     authors' default) for PLR and ``fixed`` for robust PLR, which trains on replays alone and would
     otherwise train on almost nothing until most levels had a score."""
-    min_seen_share: float = Field(default=0.0, ge=0.0, le=1.0)
-    """No replay until this share of the levels has a score (the authors' ρ of the schedule)."""
+    min_seen_share: float | None = Field(default=None, ge=0.0, le=1.0)
+    """No replay until this share of the levels has a score (the authors' ρ of the schedule); null
+    means 1.0 for PLR, the authors' and Syllabus's default (every level is played once, in a sweep
+    without repeats, before any replay), and 0.0 for robust PLR, so that it trains from its first
+    replays rather than after a whole sweep of scoring-only episodes."""
     robust: bool = False
     """Robust PLR: an exploring draw is for scoring only (``score_only`` on the task), so the learner
     trains on replayed levels alone."""
@@ -138,8 +141,9 @@ class PlrTeacher(_LevelTeacher):
         super().__init__(space, seed, params)
         p = self.params
         schedule = p.replay_schedule or ("fixed" if p.robust else "proportionate")
+        min_seen_share = p.min_seen_share if p.min_seen_share is not None else (0.0 if p.robust else 1.0)
         self.sampler = LevelReplay(
-            space.level_count(), p.temperature, p.staleness_coef, p.replay_prob, p.min_seen_share, schedule
+            space.level_count(), p.temperature, p.staleness_coef, p.replay_prob, min_seen_share, schedule
         )
         self.returns = np.zeros(self.sampler.levels)
         """Each scored level's last return, the fallback score's baseline."""

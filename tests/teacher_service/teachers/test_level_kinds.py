@@ -42,6 +42,17 @@ def test_robust_plr_trains_on_half_its_draws_from_the_first_score() -> None:
     assert proportionate.sample_marked(400)[1].count(False) < 20, "one level of 1,000 scored: almost no replay"
 
 
+def test_plain_plr_plays_every_level_once_before_any_replay() -> None:
+    teacher = make_teacher("plr", TEN, 0)
+    first_pass = []
+    for _ in range(10):
+        level = teacher.sample(1)[0]["level"]
+        first_pass.append(level)
+        teacher.learn(EpisodeResult({"level": level}, 0.0, score=1.0 if level == 3 else 0.0))
+    assert sorted(first_pass) == list(range(10)), "the authors' rho of 1: a sweep without repeats first"
+    assert Counter(task["level"] for task in teacher.sample(200)).most_common(1)[0][0] == 3, "then replays"
+
+
 def test_plain_plr_marks_nothing() -> None:
     teacher = make_teacher("plr", TEN, 0)
     assert teacher.sample_marked(30)[1] == [False] * 30
