@@ -6,15 +6,19 @@ The write-up reads three of them: the metrics (learning curves), the final evalu
 checkpoint (so a reader can evaluate it again). Once a bake-off run or a tune trial is trained (and
 evaluated), ``archive_run`` leaves the run in this form:
 
-- for git (``write_up_files``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` and
-  ``checkpoints/`` with the final checkpoint alone, evaluation-only (``save_evaluation_only``: no
-  optimiser state, a third of the size; evaluate and render read it), the earlier ones deleted;
-- on disk only (``resume_files``, git-ignored): ``resume.pt``, the final checkpoint in full, and
-  ``teacher.sqlite.xz``, ``train.log.xz`` and ``teacher.log.xz``, which ``restore_run`` puts back
-  before a larger budget resumes the run, and ``tensorboard/``.
+- for git (``write_up_files``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` with
+  the fields the write-ups read alone (``WRITE_UP_METRICS``, ``thin_metrics``) and ``checkpoints/``
+  with the final checkpoint alone, evaluation-only (``save_evaluation_only``: no optimiser state, a
+  third of the size; evaluate and render read it), the earlier ones deleted;
+- on disk only (``resume_files``, git-ignored): ``resume.pt``, the final checkpoint in full,
+  ``metrics.full.jsonl.xz``, the metrics log in full, and ``teacher.sqlite.xz``, ``train.log.xz`` and
+  ``teacher.log.xz``, which ``restore_run`` puts back before a larger budget resumes the run (the full
+  metrics as the raw ``metrics.jsonl``, which training appends to), and ``tensorboard/``.
 
 Readers go through ``read_text``, which takes either form, so directories written before archiving
-existed (the committed v1 bake-offs) read as they are. The measured sizes: docs/results/bakeoff-hard.md.
+existed (the committed v1 bake-offs) read as they are; so does a run archived before its metrics were
+split (its ``metrics.jsonl.xz`` the full log, with no full copy beside it), and ``restore_run`` restores
+it as before. The measured sizes: docs/results/bakeoff-hard.md.
 
 Each step is safe to interrupt: a compressed file is written under a temporary name and renamed,
 and the raw file goes only after that, so a raw file present is always the authoritative copy.
@@ -23,6 +27,7 @@ and the raw file goes only after that, so a raw file present is always the autho
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import json
 import lzma
 import os
@@ -51,6 +56,19 @@ RESUME_CHECKPOINT = "resume.pt"
 evaluation-only copy in ``checkpoints/``."""
 TENSORBOARD_DIR = "tensorboard"
 """The run's TensorBoard events, which duplicate its metrics log: left on disk, never for git."""
+FULL_METRICS = "metrics.full.jsonl"
+"""An archived run's metrics log in full (compressed, on disk only), while git keeps ``WRITE_UP_METRICS``."""
+WRITE_UP_METRICS = (
+    "step",
+    "time",
+    "eval/*",
+    "train/episodes",
+    "train/success_rate",
+    "perf/steps_per_second",
+)
+"""The fields (patterns) an archived run's git copy of its metrics keeps, those its readers use: step, time, eval/*
+(bakeoff_runs, tune_report, curriculum_diagnostics), perf/steps_per_second (bench/levels_side_by_side.py),
+train/episodes and train/success_rate (the training success in docs/results/tune.md)."""
 
 
 def _raw_files() -> tuple[str, ...]:
@@ -75,10 +93,16 @@ def write_up_files() -> tuple[str, ...]:
 
 def resume_files() -> tuple[str, ...]:
     """The paths, relative to the run directory, that an archived run keeps on disk only (git-ignored):
-    what ``restore_run`` needs to resume it (the full final checkpoint, the compressed teacher database
-    and logs) and TensorBoard's events."""
+    what ``restore_run`` needs to resume it (the full final checkpoint and metrics log, the compressed
+    teacher database and logs) and TensorBoard's events."""
     database, _metrics, *logs = _raw_files()
-    return (RESUME_CHECKPOINT, database + SUFFIX, *(log + SUFFIX for log in logs), TENSORBOARD_DIR)
+    return (
+        RESUME_CHECKPOINT,
+        FULL_METRICS + SUFFIX,
+        database + SUFFIX,
+        *(log + SUFFIX for log in logs),
+        TENSORBOARD_DIR,
+    )
 
 
 def compressed(path: Path) -> Path:
@@ -138,33 +162,103 @@ def _close_database(path: Path) -> None:
         path.with_name(path.name + leftover).unlink(missing_ok=True)
 
 
+def _compress(source: Path, target: Path) -> None:
+    """``source`` xz-compressed to ``target``, written whole under a temporary name first."""
+    partial = target.with_name(target.name + ".partial")
+    with source.open("rb") as raw, lzma.open(partial, "wb", preset=6) as packed:
+        shutil.copyfileobj(raw, packed)
+    os.replace(partial, target)
+
+
+def _decompress(source: Path, target: Path) -> None:
+    """``source`` decompressed to ``target``, written whole under a temporary name first."""
+    partial = target.with_name(target.name + ".partial")
+    with lzma.open(source, "rb") as packed, partial.open("wb") as raw:
+        shutil.copyfileobj(packed, raw)
+    os.replace(partial, target)
+
+
 def _pack(path: Path) -> None:
-    partial = path.with_name(path.name + SUFFIX + ".partial")
-    with path.open("rb") as source, lzma.open(partial, "wb", preset=6) as target:
-        shutil.copyfileobj(source, target)
-    os.replace(partial, compressed(path))
+    _compress(path, compressed(path))
     path.unlink()
 
 
 def _unpack(path: Path) -> None:
-    partial = path.with_name(path.name + ".partial")
-    with lzma.open(compressed(path), "rb") as source, partial.open("wb") as target:
-        shutil.copyfileobj(source, target)
-    os.replace(partial, path)
+    _decompress(compressed(path), path)
     compressed(path).unlink()
 
 
-def archive_run(run_dir: Path) -> None:
-    """Compress a finished, evaluated run's raw files and keep only its latest (evaluated) checkpoint,
-    evaluation-only, with its full form moved to ``RESUME_CHECKPOINT``.
+def full_log(log: Path) -> Path:
+    """Where ``thin_metrics`` keeps a metrics log in full, compressed: ``FULL_METRICS`` + ``SUFFIX`` beside
+    ``metrics.jsonl`` (``metrics-x.full.jsonl.xz`` beside ``metrics-x.jsonl``)."""
+    return compressed(log.with_suffix(".full" + log.suffix))
 
-    Call it only when no process has the run open. A run already archived is left untouched.
+
+def _kept(field: str) -> bool:
+    return any(fnmatch.fnmatchcase(field, pattern) for pattern in WRITE_UP_METRICS)
+
+
+def _thin(text: str) -> str:
+    """Each record of a metrics log with ``WRITE_UP_METRICS`` alone, in their order, values as they were
+    (json round-trips them); a line cut short is left out, as ``metrics_records`` leaves it out."""
+    lines = []
+    for line in text.splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        lines.append(json.dumps({field: value for field, value in record.items() if _kept(field)}) + "\n")
+    return "".join(lines)
+
+
+def _decompressed(path: Path) -> str:
+    return lzma.decompress(path.read_bytes()).decode("utf-8", errors="replace")
+
+
+def thin_metrics(log: Path) -> None:
+    """Split a metrics log (``run_dir / METRICS_FILE``): in full, compressed, to ``full_log(log)`` (on disk
+    only, for resuming), and for git its compressed copy ``metrics.jsonl.xz`` with ``WRITE_UP_METRICS`` alone.
+
+    The full log comes from the raw file when there is one (always the authoritative copy; removed last),
+    else from a ``metrics.jsonl.xz`` compressed before this split, which is the full log (copied as it is;
+    the fullest copy there is, whatever it holds beyond ``WRITE_UP_METRICS``).
+    A log already split, or a git copy already thin with no full log beside it (a clone), is left
+    untouched. Safe to interrupt and to call again.
+    """
+    log = Path(log)
+    packed, full = compressed(log), full_log(log)
+    if log.exists():
+        _compress(log, full)
+    elif not full.exists():
+        text = _decompressed(packed) if packed.exists() else ""
+        if _thin(text) == text:  # nothing to split: no log, or only the git copy, thin already
+            return
+        partial = full.with_name(full.name + ".partial")
+        shutil.copyfile(packed, partial)
+        os.replace(partial, full)
+    thin = _thin(_decompressed(full))
+    if log.exists() or not packed.exists() or _decompressed(packed) != thin:
+        partial = packed.with_name(packed.name + ".partial")
+        with lzma.open(partial, "wb", preset=6) as target:
+            target.write(thin.encode("utf-8"))
+        os.replace(partial, packed)
+    log.unlink(missing_ok=True)
+
+
+def archive_run(run_dir: Path) -> None:
+    """Compress a finished, evaluated run's raw files, its metrics log split by ``thin_metrics``, and keep
+    only its latest (evaluated) checkpoint, evaluation-only, with its full form moved to ``RESUME_CHECKPOINT``.
+
+    Call it only when no process has the run open. A run already archived is left untouched (one
+    archived before the metrics were split too: ``thin_metrics`` splits it when called on its own).
     """
     run_dir = Path(run_dir)
     database, *others = _raw_files()
     _close_database(run_dir / database)
     for name in (database, *others):
-        if (run_dir / name).exists():
+        if name == METRICS_FILE and (run_dir / name).exists():
+            thin_metrics(run_dir / name)
+        elif (run_dir / name).exists():
             _pack(run_dir / name)
     final = latest_checkpoint(run_dir)
     for entry in (run_dir / CHECKPOINT_DIR).glob("*"):
@@ -181,10 +275,18 @@ def archive_run(run_dir: Path) -> None:
 def restore_run(run_dir: Path) -> None:
     """Put back an archived run's full final checkpoint and decompress its raw files, so training can
     resume it from that checkpoint. A run archived without its full checkpoint (the committed ones, in a
-    clone) keeps the evaluation-only one, which training refuses to resume from."""
+    clone) keeps the evaluation-only one, which training refuses to resume from. The metrics come back in
+    full (``full_log``) where the run has them, so a resumed run appends to its complete log; a run archived
+    before its metrics were split gets its one ``metrics.jsonl.xz`` back."""
     full = Path(run_dir) / RESUME_CHECKPOINT
     if full.exists():
         os.replace(full, checkpoint_path(run_dir, load_checkpoint(full).counters.steps))
+    log = Path(run_dir) / METRICS_FILE
+    if full_log(log).exists():
+        if not log.exists():
+            _decompress(full_log(log), log)
+        compressed(log).unlink(missing_ok=True)  # the thin copy, once the raw log is whole
+        full_log(log).unlink()
     for name in _raw_files():
         path = Path(run_dir) / name
         if path.exists():

@@ -89,6 +89,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert sorted(path.name for path in fixed.directory.iterdir()) == [
         "checkpoints",
         "evaluation.json",
+        "metrics.full.jsonl.xz",
         "metrics.jsonl.xz",
         "resume.pt",
         "teacher.log.xz",
@@ -98,7 +99,14 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     ]
     # For git what the report reads; the rest only on disk, for resuming.
     assert sorted(write_up_files()) == ["checkpoints", "evaluation.json", "metrics.jsonl.xz"]
-    assert sorted(resume_files()) == ["resume.pt", "teacher.log.xz", "teacher.sqlite.xz", "tensorboard", "train.log.xz"]
+    assert sorted(resume_files()) == [
+        "metrics.full.jsonl.xz",
+        "resume.pt",
+        "teacher.log.xz",
+        "teacher.sqlite.xz",
+        "tensorboard",
+        "train.log.xz",
+    ]
     capsys.readouterr()
 
     assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
@@ -395,7 +403,14 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
 
     archive_run(run.directory)
     names = sorted(path.name for path in run.directory.iterdir())
-    assert names == ["checkpoints", "metrics.jsonl.xz", "resume.pt", "teacher.sqlite.xz", "train.log.xz"]
+    assert names == [
+        "checkpoints",
+        "metrics.full.jsonl.xz",
+        "metrics.jsonl.xz",
+        "resume.pt",
+        "teacher.sqlite.xz",
+        "train.log.xz",
+    ]
     assert set(names) - set(write_up_files()) <= set(resume_files()), "nothing else stays beside the write-up's"
     assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [final.name]
     assert load_checkpoint(final).evaluation_only, "git keeps the final checkpoint without its optimiser state"

@@ -122,4 +122,6 @@ def test_an_archived_bakeoff_run_reads_as_its_raw_files_did(tmp_path: Path) -> N
         assert np.array_equal(getattr(archived, field), getattr(raw, field)), field
     assert summary_markdown([archived]) == summary_markdown([raw])
     names = sorted(path.name for path in run_dir.iterdir())
-    assert names == ["evaluation.json", "metrics.jsonl.xz", "teacher.sqlite.xz"], "no decompressed copy left behind"
+    assert names == ["evaluation.json", "metrics.full.jsonl.xz", "metrics.jsonl.xz", "teacher.sqlite.xz"], (
+        "no decompressed copy left behind"
+    )
