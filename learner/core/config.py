@@ -14,6 +14,11 @@ from typing import TYPE_CHECKING, Any, Literal
 from common.kuka import ENV_ID, ENV_IDS
 from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS, MAX_LEVELS, is_level_env
 from common.policy.noise import LOG_STD_BOUNDS
+from learner.core.periodic_evaluation import (
+    EVALUATION_SEED_SCHEMES,
+    MAX_STRATIFIED_EPISODES,
+    EvaluationSeeds,
+)
 from teacher_service.teachers import TEACHER_KINDS
 
 if TYPE_CHECKING:
@@ -179,6 +184,8 @@ class TrainConfig:
     """Iterations between evaluations on the hardest task (0 = never); 25 keeps their cost near 5%."""
     eval_episodes: int = 10
     """Evaluation episodes, one per fixed seed, shared out over the workers."""
+    eval_seeds: EvaluationSeeds = "stratified"
+    """A KUKA family's evaluation seeds: placements spread as the final evaluation's, or consecutive from 10,000."""
     loop: Literal["async", "sync"] = "async"
     """async: workers sample the next batch, one update behind, while the learner updates; sync: on-policy, paused."""
     teacher_overrides: dict[str, Any] = field(default_factory=dict)
@@ -197,6 +204,14 @@ class TrainConfig:
         _require(self.checkpoint_every >= 1, "checkpoint_every must be at least 1")
         _require(self.eval_every >= 0, "eval_every must be 0 (never) or more")
         _require(self.eval_episodes >= 1, "eval_episodes must be at least 1")
+        _require(
+            self.eval_seeds in EVALUATION_SEED_SCHEMES,
+            f"eval_seeds must be one of {', '.join(EVALUATION_SEED_SCHEMES)}, got {self.eval_seeds!r}",
+        )
+        _require(
+            self.eval_seeds != "stratified" or is_level_env(self.env) or self.eval_episodes <= MAX_STRATIFIED_EPISODES,
+            f"stratified evaluation seeds take at most {MAX_STRATIFIED_EPISODES:,} eval_episodes",
+        )
         _require(self.loop in LOOPS, f"loop must be one of {', '.join(LOOPS)}, got {self.loop!r}")
 
     @property
@@ -221,6 +236,8 @@ class TrainConfig:
         ppo = dict(data.get("ppo", {}))
         # Runs from before ``loop`` existed were synchronous, and resume as they started.
         values.setdefault("loop", "sync")
+        # Runs from before ``eval_seeds`` existed evaluated on consecutive seeds, and resume so: one curve, one set.
+        values.setdefault("eval_seeds", "consecutive")
         # Checkpoints from before ``angle_features`` existed were trained on raw angles.
         ppo.setdefault("angle_features", False)
         if "hidden_sizes" in ppo:

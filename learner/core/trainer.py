@@ -241,7 +241,9 @@ class _IterationLoop:
         if self.evaluation is not None:
             self._collect_evaluation()  # still running: one at a time, in order
         episodes = self.pool.start_evaluation(
-            snapshot_ref, evaluation_task(self.config.env), evaluation_seeds(self.config.eval_episodes, self.config.env)
+            snapshot_ref,
+            evaluation_task(self.config.env),
+            evaluation_seeds(self.config.eval_episodes, self.config.env, self.config.eval_seeds),
         )
         self.evaluation = _Evaluation(episodes, self.held[-1][1], time.perf_counter())
 
