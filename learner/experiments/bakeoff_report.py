@@ -77,12 +77,14 @@ def teacher_record(result: TeacherResult) -> dict[str, Any]:
                 "mean_length": evaluation.mean_length,
                 "steps_to_success": steps,
                 "steps_to_half_success": half,
+                "curve_seeds": seeds,
             }
-            for run, evaluation, steps, half in zip(
+            for run, evaluation, steps, half, seeds in zip(
                 result.runs,
                 result.evaluations,
                 result.seed_steps_to_success,
                 result.seed_steps_to(HALF_SUCCESS),
+                result.seed_curve_seeds,
                 strict=True,
             )
         ],
@@ -146,6 +148,28 @@ def placement_markdown(results: Sequence[TeacherResult], scripted: EvaluationRes
         f"![Success by block placement]({PLACEMENT_PLOT})",
         "",
     ]
+
+
+def curve_seeds_note(results: Sequence[TeacherResult]) -> str:
+    """What the in-run evaluations played: stratified seeds, and which runs, trained before them, played the
+    consecutive seeds from 10,000 instead, whose steps read early."""
+    older = [
+        f"{run.teacher} seed {run.seed}"
+        for result in results
+        for run, seeds in zip(result.runs, result.seed_curve_seeds, strict=True)
+        if seeds == "consecutive"
+    ]
+    note = (
+        "Their episodes are a fixed stratified set of the hardest task's, whose blocks lie over the placement "
+        "bands as the final evaluation's do (`learner.core.periodic_evaluation`)."
+    )
+    if older:
+        note += (
+            f" Except for {', '.join(older)}: trained before issue 59, their in-run evaluations played the "
+            "consecutive seeds from 10,000, whose blocks lie nearer the arm than the final evaluation's, so "
+            "their steps read early."
+        )
+    return note
 
 
 def _format_return(interval: Interval) -> str:
@@ -243,7 +267,8 @@ def results_markdown(
         "The interval is a Student-t interval over the per-seed success rates: it says how much a new seed may "
         f"vary. Steps to a success rate: the first step at which {CURVE_WINDOW} consecutive in-run "
         f"evaluations on the hardest task ({settings['curve_episodes']} episodes each, every "
-        f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest.",
+        f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest. "
+        + curve_seeds_note(results),
         "",
         "## Pooled episodes: evaluation noise",
         "",

@@ -231,6 +231,14 @@ def learning_curve(run: Run, metric: str = "eval/return") -> dict[int, float]:
     return {int(record["step"]): float(record[metric]) for record in records if record.get(metric) is not None}
 
 
+def curve_seeds(run: Run) -> str | None:
+    """Which seeds the run's in-run evaluations played, as its latest checkpoint's config says
+    (``TrainConfig.eval_seeds``): ``stratified``, or ``consecutive`` for a run started before issue 59,
+    whose curve's blocks lay nearer the arm than the final evaluation's; None before its first checkpoint."""
+    path = latest_checkpoint(run.directory)
+    return load_checkpoint(path).config.eval_seeds if path is not None else None
+
+
 def train_run(run: Run, command: list[str], progress: tqdm[Any], steps_of_other_runs: int) -> bool:
     """Run one training child to its end; False when it was interrupted (Ctrl-C).
 

@@ -15,7 +15,7 @@ import numpy as np
 from common.kuka import ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
 from learner.checkpoint_evaluation import EvaluationResult
-from learner.experiments.bakeoff_runs import Run, learning_curve
+from learner.experiments.bakeoff_runs import Run, curve_seeds, learning_curve
 from learner.stats import Interval, mean_interval, wilson_interval
 
 SUCCESS_TARGET = 0.8
@@ -30,7 +30,14 @@ CURVE_WINDOW = 3
 
 def steps_to_success(run: Run, target: float = SUCCESS_TARGET, window: int = CURVE_WINDOW) -> int | None:
     """The first step at which the last ``window`` in-run evaluations, pooled, reach ``target`` success
-    (they share their episode count, so pooling is their mean); None if they never do."""
+    (they share their episode count, so pooling is their mean); None if they never do.
+
+    A moving mean rather than the first evaluation at the target: one evaluation of 20 episodes at a true 70%
+    reaches 80% about one time in four, so the first crossing of a single one reads early, and a run that
+    touches the target once and falls back is not counted as there. The step is that of the window's last
+    evaluation, the first at which the run's curve says it is there. Since issue 59 the evaluations play
+    stratified seeds (``learner.core.periodic_evaluation``), placed as the final evaluation's episodes are;
+    an older run's (``curve_seeds``) played easier ones, and reads early."""
     curve = sorted(learning_curve(run, "eval/success_rate").items())
     for end in range(window, len(curve) + 1):
         if np.mean([rate for _, rate in curve[end - window : end]]) >= target:
@@ -97,6 +104,11 @@ class TeacherResult:
         """Per timed success rate, each seed's steps to it: read from the metrics logs once, as the
         report asks for them in both its files."""
         return {target: [steps_to_success(run, target) for run in self.runs] for target in STEP_TARGETS}
+
+    @cached_property
+    def seed_curve_seeds(self) -> list[str | None]:
+        """Per seed, which seeds its in-run evaluations played (``bakeoff_runs.curve_seeds``)."""
+        return [curve_seeds(run) for run in self.runs]
 
     @property
     def seed_steps_to_success(self) -> list[int | None]:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import pytest
+import torch
 from ctrl_c import ctrl_c_as_the_pool_starts
 from tiny_checkpoint import save_untrained_checkpoint
 
@@ -248,6 +249,46 @@ def test_steps_to_success_pools_consecutive_evaluations_and_the_median_counts_a_
     assert median_steps([600, None, 300]) == 600
     assert median_steps([600, None, None]) is None
     assert median_steps([400, 200, None, 100]) == 300
+
+
+def test_steps_to_success_takes_a_moving_mean_so_a_lone_evaluation_at_the_target_is_not_enough(tmp_path):
+    run = Run("currot", 0, tmp_path)
+
+    def curve(rates: list[float]) -> None:
+        records = [{"step": 1000 * (index + 1), "eval/success_rate": rate} for index, rate in enumerate(rates)]
+        (tmp_path / "metrics.jsonl").write_text("".join(json.dumps(record) + "\n" for record in records))
+
+    curve([0.0, 0.85, 0.6, 0.85, 0.6, 0.95, 0.55])  # at 80% every other time, a mean of about 0.7: never there
+    assert steps_to_success(run) is None
+    assert steps_to_success(run, window=1) == 2000, "one evaluation alone would have read it at the first spike"
+    curve([0.0, 0.5, 0.75, 0.8, 0.85, 0.8, 0.7, 0.9])  # the first three at a mean of 80% end at 6,000 steps
+    assert steps_to_success(run) == 6000
+    curve([])  # a run without in-run evaluations never gets there
+    assert steps_to_success(run) is None
+    # The median over seeds: not reached when the middle seed never got there, with an even count as well.
+    assert median_steps([None, None, None]) is None
+    assert median_steps([3000, None]) is None
+    assert median_steps([3000, 1000, None, None, 2000]) == 3000
+
+
+def test_the_report_says_which_runs_curves_played_the_older_easier_seeds(tmp_path):
+    task = KUKA_HARD_V1_TASK_SPACE.hardest()
+    evaluation = EvaluationResult(task, 100000, (EpisodeStats(task, 1.0, True, 800),), HARD_V1_ENV_ID)
+    runs = tuple(Run("currot", seed, tmp_path / f"currot-seed{seed}") for seed in range(3))
+    save_untrained_checkpoint(runs[0].directory, env=HARD_V1_ENV_ID)
+    older = save_untrained_checkpoint(runs[1].directory, env=HARD_V1_ENV_ID)
+    saved = torch.load(older, weights_only=True)
+    del saved["config"]["eval_seeds"]  # written before issue 59
+    torch.save(saved, older)
+    result = TeacherResult("currot", runs, (evaluation,) * 3, HARD_V1_ENV_ID)  # seed 2: no checkpoint yet
+    assert result.seed_curve_seeds == ["stratified", "consecutive", None]
+    assert [entry["curve_seeds"] for entry in teacher_record(result)["runs"]] == ["stratified", "consecutive", None]
+    settings = {"total_steps": 1000, "curve_every": 25, "curve_episodes": 20, "teacher_params": {}}
+    report = results_markdown([result], settings, episodes=1, seed=100000)
+    assert "a fixed stratified set of the hardest task's" in report
+    assert "Except for currot seed 1: trained before issue 59" in report and "seed 0:" not in report
+    fresh = TeacherResult("currot", runs[:1], (evaluation,), HARD_V1_ENV_ID)
+    assert "Except for" not in results_markdown([fresh], settings, episodes=1, seed=100000)
 
 
 def test_the_success_interval_over_seeds_stays_within_zero_and_one(tmp_path):
