@@ -5,9 +5,9 @@ agree and where they name a departure.
 - PLR: Syllabus's ``TaskSampler`` (rank transform, staleness mix) against ``LevelReplay``'s replay
   distribution, both given the same scores, unseen levels and staleness.
 - Learning progress: Syllabus's ``OnlineLearningProgress`` (its defaults: success normalised by the
-  first interval's baseline) against ``LearningProgress``, fed the same episodes with the same update interval, once with every level
-  played in each interval (where they should agree) and once with a random half (where Syllabus
-  folds a rate of 0 into the levels not played and we leave them be).
+  first interval's baseline) against ``LearningProgress``, fed the same episodes with the same update
+  interval, once with every level played in each interval (where they should agree) and once with a
+  random half (where Syllabus folds a rate of 0 into the levels not played and we leave them be).
 
     .venv/bin/python bench/level_parity.py [--out FILE]
 """
@@ -61,9 +61,7 @@ def learning_progress_case(rng: np.random.Generator, played_share: float, interv
     from syllabus.task_space import DiscreteTaskSpace
 
     interval = 2 * LEVELS
-    theirs = OnlineLearningProgress(
-        DiscreteTaskSpace(LEVELS), update_interval=interval, uniform_prob=0.25
-    )
+    theirs = OnlineLearningProgress(DiscreteTaskSpace(LEVELS), update_interval=interval, uniform_prob=0.25)
     ours = LearningProgress(LEVELS, ema_rate=0.1, reweight_theta=0.1, uniform_share=0.25)
     skill = rng.uniform(0.0, 1.0, size=LEVELS)
     for round_ in range(intervals):
