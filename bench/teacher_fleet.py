@@ -4,8 +4,9 @@ Each worker draws ``--batch`` tasks, "plays" them for a random 0.5 to 2 s, and r
 ``--workers`` of them share one real ``serve`` over ten curricula of four kinds on the KUKA box
 (ALP-GMM, CURROT, learnability and random, the adaptive ones fitting as they go). Prints the requests
 by status (5xx must be 0), p50 and p99 per endpoint, results per second, the service's CPU seconds per
-result and results per second of service CPU (its fit processes included), its memory at the start
-and the end, and the generator's own CPU beside it.
+result and results per second of service CPU (its fit processes included), the main process's own
+CPU per result (HTTP, teachers and store, without the fits), its memory at the start and the end, and
+the generator's own CPU beside it.
 
     .venv/bin/python bench/teacher_fleet.py --workers 1000 --seconds 600             # one task a request
     .venv/bin/python bench/teacher_fleet.py --workers 32 --batch 32 --seconds 600    # 32 a request
@@ -170,6 +171,7 @@ def main() -> int:
                 )
             memory_start = family_rss_mb(server.pid)
             service_cpu, generator_cpu = family_cpu_seconds(server.pid), time.process_time()
+            main_cpu = cpu_seconds(server.pid)
             tally = Tally()
             started = time.perf_counter()
             stop = started + args.seconds
@@ -180,6 +182,7 @@ def main() -> int:
             asyncio.run(fleet())
             elapsed = time.perf_counter() - started
             service_cpu = family_cpu_seconds(server.pid) - service_cpu
+            main_cpu = cpu_seconds(server.pid) - main_cpu
             generator_cpu = time.process_time() - generator_cpu
             memory_end = family_rss_mb(server.pid)
         finally:
@@ -203,6 +206,7 @@ def main() -> int:
         },
         "service_cpu_ms_per_result": round(1000 * service_cpu / max(tally.results, 1), 3),
         "results_per_service_cpu_s": round(tally.results / max(service_cpu, 1e-9), 0),
+        "service_main_cpu_ms_per_result": round(1000 * main_cpu / max(tally.results, 1), 3),
         "service_busy_cores": round(service_cpu / elapsed, 2),
         "generator_busy_cores": round(generator_cpu / elapsed, 2),
         "service_rss_mb": [round(memory_start, 0), round(memory_end, 0)],
