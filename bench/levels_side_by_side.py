@@ -30,6 +30,7 @@ import contextlib
 import json
 import sys
 import time
+import uuid
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,24 @@ def run_config(args: argparse.Namespace, kind: str, seed: int) -> TrainConfig:
     )
 
 
+CURRICULUM_NAME_FILE = "curriculum.txt"
+
+
+def curriculum_name(run_dir: Path, base: str, resuming: bool) -> str:
+    """The run's curriculum name on the shared service: a fresh run gets ``base`` and a new suffix, kept
+    in the run directory for its resumes, so a run made again (its directory deleted) never picks up
+    the curriculum, and the results, of the run it replaces. A resumed run from before the suffix keeps
+    ``base``."""
+    kept = run_dir / CURRICULUM_NAME_FILE
+    if kept.exists():
+        return kept.read_text().strip()
+    if resuming:
+        return base[:64]
+    name = f"{base[:55]}-{uuid.uuid4().hex[:8]}"
+    kept.write_text(name + "\n")
+    return name
+
+
 def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, teacher_url: str) -> Path:
     """Train (or resume) one run; returns its final checkpoint."""
     import ray
@@ -105,7 +124,7 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
     config = run_config(args, kind, seed)
     previous = latest_checkpoint(run_dir)
     checkpoint = load_checkpoint(previous) if previous is not None else None
-    name = f"{run_dir.parent.parent.name}-{kind}-seed{seed}"[:64]
+    name = curriculum_name(run_dir, f"{run_dir.parent.parent.name}-{kind}-seed{seed}", previous is not None)
     task_source: Any = None
     syllabus_actor = None
     if kind in OURS:
