@@ -13,10 +13,12 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from fastapi.exceptions import RequestValidationError
+from starlette.types import ASGIApp
 
 from teacher_service.api.docs import add_offline_docs
 from teacher_service.api.errors import store_error_handler, validation_error_handler
-from teacher_service.api.hosts import AllowedHostsMiddleware
+from teacher_service.api.hosts import AllowedHosts, AllowedHostsMiddleware
+from teacher_service.api.hot_routes import HotRoutes
 from teacher_service.api.routes import curricula, health, teachers
 from teacher_service.core.config import ANY_HOST, Settings
 from teacher_service.dashboard import router as dashboard_router
@@ -36,6 +38,17 @@ def _settle_garbage_collector() -> None:
     gc.collect()
     gc.freeze()
     gc.set_threshold(YOUNG_GENERATION_THRESHOLD, *gc.get_threshold()[1:])
+
+
+class TeacherServiceApp(FastAPI):
+    """FastAPI with ``HotRoutes`` in front of its whole middleware stack, so that drawing tasks and
+    reporting results skip the framework's layers (it still serves every other request)."""
+
+    def build_middleware_stack(self) -> ASGIApp:
+        settings: Settings = self.state.settings
+        names = settings.host_names()
+        hosts = None if ANY_HOST in names else AllowedHosts(names)
+        return HotRoutes(super().build_middleware_stack(), self.state, settings, self.state.metrics, hosts)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -59,7 +72,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             registry.close()
 
-    app = FastAPI(
+    app = TeacherServiceApp(
         title="kuka-curriculum teacher service",
         summary="Hands each episode a task from a curriculum teacher and learns from the results.",
         version="1.0.0",

@@ -53,15 +53,19 @@ CurriculumDep = Annotated[Curriculum, Depends(get_curriculum)]
 _bearer = HTTPBearer(auto_error=False, description="Needed on PUT and POST when KC_TEACHER_TOKEN is set.")
 
 
+def write_token_matches(settings: Settings, given: str) -> bool:
+    """Whether ``given`` (a bearer token, or empty) may write: any may when no token is set."""
+    if settings.teacher_token is None:
+        return True
+    return hmac.compare_digest(given.encode(), settings.teacher_token.get_secret_value().encode())
+
+
 async def require_token(
     request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
 ) -> None:
     """Guard writes with the shared token; reads stay open so dashboards need no secret."""
     settings: Settings = request.app.state.settings
-    if settings.teacher_token is None:
-        return
-    given = credentials.credentials if credentials is not None else ""
-    if not hmac.compare_digest(given.encode(), settings.teacher_token.get_secret_value().encode()):
+    if not write_token_matches(settings, credentials.credentials if credentials is not None else ""):
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
             "this service needs 'Authorization: Bearer <token>' with the token in KC_TEACHER_TOKEN",

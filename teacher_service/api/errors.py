@@ -1,8 +1,9 @@
 """Error answers that say what went wrong.
 
 JSON-safe 422s: FastAPI's default handler echoes each offending input back; a NaN or infinite
-reward cannot be written as JSON, which would turn the client's mistake into a 500. Non-finite
-numbers are echoed as strings instead.
+reward cannot be written as JSON, nor a lone surrogate (a task id with a ``\ud800`` escape) as
+UTF-8, either of which would turn the client's mistake into a 500. Non-finite numbers are echoed as
+strings instead, and lone surrogates as their escapes.
 
 503 for a write the database refused (disk full, read-only file, I/O error): nothing of the request
 was stored and the same request can be sent again, so the answer asks for a retry and says why
@@ -28,6 +29,8 @@ STORE_RETRY_AFTER_S = 5
 def _json_safe(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
+    if isinstance(value, str) and not value.isascii():
+        return value.encode("utf-8", "backslashreplace").decode("utf-8")
     if isinstance(value, dict):
         return {key: _json_safe(item) for key, item in value.items()}
     if isinstance(value, list):

@@ -21,9 +21,10 @@ def host_name(header: str) -> str:
     return header.partition(":")[0]
 
 
-class AllowedHostsMiddleware:
-    def __init__(self, app: ASGIApp, allowed: list[str]) -> None:
-        self.app = app
+class AllowedHosts:
+    """The host names answered: exact names, and ``*.example.org`` for the subdomains of one."""
+
+    def __init__(self, allowed: list[str]) -> None:
         self.allowed = allowed
         self.names = frozenset(name for name in allowed if not name.startswith("*."))
         self.suffixes = tuple(name[1:] for name in allowed if name.startswith("*."))
@@ -31,18 +32,24 @@ class AllowedHostsMiddleware:
     def allows(self, name: str) -> bool:
         return name in self.names or (bool(name) and name.endswith(self.suffixes))
 
+
+class AllowedHostsMiddleware:
+    def __init__(self, app: ASGIApp, allowed: list[str]) -> None:
+        self.app = app
+        self.hosts = AllowedHosts(allowed)
+
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         name = host_name(Headers(scope=scope).get("host", ""))
-        if self.allows(name):
+        if self.hosts.allows(name):
             await self.app(scope, receive, send)
             return
         response = JSONResponse(
             {
                 "detail": f"this teacher service does not answer for host {name[:100]!r}; it answers for "
-                f"{', '.join(self.allowed)} (KC_ALLOWED_HOSTS; add the name you reach it by there)"
+                f"{', '.join(self.hosts.allowed)} (KC_ALLOWED_HOSTS; add the name you reach it by there)"
             },
             status_code=400,
         )

@@ -29,8 +29,8 @@ UNLIMITED_PAGES = 1073741823
 class InProcessService:
     """uvicorn serving ``create_app`` on a loop of its own thread; ``on_loop`` runs code there."""
 
-    def __init__(self, db: Path, token: str | None = None) -> None:
-        self.app = create_app(Settings(db=db, teacher_token=token, log_level="warning"))
+    def __init__(self, db: Path, token: str | None = None, allowed_hosts: list[str] | None = None) -> None:
+        self.app = create_app(Settings(db=db, teacher_token=token, allowed_hosts=allowed_hosts, log_level="warning"))
         self.port = free_port()
         self.server = uvicorn.Server(
             uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning", access_log=False)

@@ -20,7 +20,7 @@ from common.client.schemas import (
 )
 from teacher_service.api.deps import CurriculumDep, CurriculumName, RegistryDep, WriteAccess
 from teacher_service.api.responses import curriculum_info, curriculum_state
-from teacher_service.curricula import CurriculumConflict, InvalidResults
+from teacher_service.curricula import Curriculum, CurriculumConflict, InvalidResults
 from teacher_service.curriculum_spec import CurriculumRequest
 
 router = APIRouter(prefix=f"{API_PREFIX}/curricula", tags=["curricula"])
@@ -89,20 +89,31 @@ async def get_curriculum(curriculum: CurriculumDep) -> CurriculumInfo:
     return curriculum_info(curriculum)
 
 
+async def issue_tasks(curriculum: Curriculum, request: TaskRequest) -> TaskBatch:
+    """``draw_tasks``'s work; ``hot_routes`` serves it too."""
+    return TaskBatch(tasks=await curriculum.issue(request.count))
+
+
+async def apply_results(curriculum: Curriculum, batch: ResultBatch) -> ResultAck:
+    """``report_results``'s work; ``hot_routes`` serves it too. Results the curriculum refuses are a
+    ``RequestValidationError`` naming them."""
+    try:
+        return await curriculum.report(batch.results)
+    except InvalidResults as invalid:
+        raise RequestValidationError(invalid.errors) from None
+
+
 @router.post("/{name}/tasks", dependencies=[WriteAccess], responses={**_NOT_FOUND, **_WRITE})
 async def draw_tasks(curriculum: CurriculumDep, request: TaskRequest) -> TaskBatch:
     """Draw tasks from the teacher's current model; they are on disk before the answer is sent."""
-    return TaskBatch(tasks=await curriculum.issue(request.count))
+    return await issue_tasks(curriculum, request)
 
 
 @router.post("/{name}/results", dependencies=[WriteAccess], responses={**_NOT_FOUND, **_WRITE})
 async def report_results(curriculum: CurriculumDep, batch: ResultBatch) -> ResultAck:
     """Report episode results. Idempotent per task id; all or nothing: one bad item (a 422 naming
     it) and no result of the request is applied."""
-    try:
-        return await curriculum.report(batch.results)
-    except InvalidResults as invalid:
-        raise RequestValidationError(invalid.errors) from None
+    return await apply_results(curriculum, batch)
 
 
 @router.get("/{name}/state", responses=_NOT_FOUND)
