@@ -99,7 +99,9 @@ class PlrParams(TeacherParams):
     than by score, so old scores get refreshed."""
     replay_prob: float = Field(default=0.5, ge=0.0, le=1.0)
     """While some level has no score yet, a draw replays with probability replay_prob (``fixed``)
-    or min(share of levels scored, replay_prob) (``proportionate``); once every level has one, always."""
+    or min(share of levels scored, replay_prob) (``proportionate``). Once every level has one, PLR
+    replays with replay_prob and draws the rest uniformly over all levels, as Syllabus's TaskSampler
+    does (the authors' code always replays then: set 1.0); robust PLR always replays then."""
     replay_schedule: Literal["proportionate", "fixed"] | None = None
     """How the replay probability grows (see ``replay_prob``); null means ``proportionate`` (the
     authors' default) for PLR and ``fixed`` for robust PLR, which trains on replays alone and would
@@ -128,7 +130,8 @@ class PlrTeacher(_LevelTeacher):
     ranks are taken among scored levels only (the authors rank every level and zero the unscored);
     scores arrive per episode, not accumulated over a rollout's partial episodes; robust PLR plays
     its new levels on the training workers with ``score_only`` set, instead of on separate
-    evaluation workers.
+    evaluation workers. Once every level has a score, PLR keeps drawing ``1 - replay_prob`` of its
+    levels uniformly, as Syllabus's replay decision does, where the authors' code always replays.
     """
 
     kind = "plr"
@@ -143,7 +146,13 @@ class PlrTeacher(_LevelTeacher):
         schedule = p.replay_schedule or ("fixed" if p.robust else "proportionate")
         min_seen_share = p.min_seen_share if p.min_seen_share is not None else (0.0 if p.robust else 1.0)
         self.sampler = LevelReplay(
-            space.level_count(), p.temperature, p.staleness_coef, p.replay_prob, min_seen_share, schedule
+            space.level_count(),
+            p.temperature,
+            p.staleness_coef,
+            p.replay_prob,
+            min_seen_share,
+            schedule,
+            replay_when_all_scored=p.robust,
         )
         self.returns = np.zeros(self.sampler.levels)
         """Each scored level's last return, the fallback score's baseline."""

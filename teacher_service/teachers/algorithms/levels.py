@@ -50,11 +50,14 @@ class LevelReplay:
     Each draw either replays a level already scored or explores one not scored yet. Once a
     ``min_seen_share`` of the levels has a score, a draw replays with probability
     ``min(seen share, replay_prob)`` (the authors' ``proportionate`` schedule) or ``replay_prob``
-    (``fixed``), and always once every level has one. A replay picks among the scored levels from the mixture
+    (``fixed``). Once every level has one, a draw replays with ``replay_prob`` and otherwise picks a
+    level uniformly among all, as Syllabus's ``TaskSampler`` decides (the authors' code always replays
+    then, which ``replay_prob`` 1 gives); with ``replay_when_all_scored`` it always replays (robust
+    PLR, whose uniform draws would be scoring only). A replay picks among the scored levels from the mixture
     ``(1 - staleness_coef) * P_S + staleness_coef * P_C``: ``P_S`` by rank of score with
     ``temperature``, ``P_C`` in proportion to the draws since the level was last drawn (staleness).
-    An exploring draw picks uniformly among the levels without a score. A new score replaces the old
-    (the authors' default ``alpha`` of 1).
+    An exploring draw picks uniformly among the levels without a score (among all once each has one).
+    A new score replaces the old (the authors' default ``alpha`` of 1).
     """
 
     UNIFORMS_PER_DRAW = 3
@@ -74,6 +77,7 @@ class LevelReplay:
         replay_prob: float,
         min_seen_share: float,
         schedule: str = "proportionate",
+        replay_when_all_scored: bool = False,
     ) -> None:
         check_level_count(levels)
         if schedule not in ("proportionate", "fixed"):
@@ -83,6 +87,7 @@ class LevelReplay:
         self.replay_prob = replay_prob
         self.min_seen_share = min_seen_share
         self.schedule = schedule
+        self.replay_when_all_scored = replay_when_all_scored
         self.scores = np.zeros(levels)
         self.seen = np.zeros(levels, dtype=bool)
         self.last_drawn = np.zeros(levels, dtype=np.int64)
@@ -95,7 +100,8 @@ class LevelReplay:
         return len(self.scores)
 
     def draw(self, uniforms: np.ndarray) -> tuple[int, bool]:
-        """The next level and whether it is a replay (else it explores a level without a score)."""
+        """The next level and whether it is a replay (else it explores: a level without a score, or any
+        level once each has one)."""
         replay = self._replays(float(uniforms[0]))
         if replay:
             seen = np.flatnonzero(self.seen)
@@ -105,7 +111,8 @@ class LevelReplay:
                 level = int(seen[pick(self._replay_score_weights(), float(uniforms[2]))])
         else:
             unseen = np.flatnonzero(~self.seen)
-            level = int(unseen[min(int(float(uniforms[2]) * len(unseen)), len(unseen) - 1)])
+            candidates = unseen if len(unseen) else np.arange(self.levels)
+            level = int(candidates[min(int(float(uniforms[2]) * len(candidates)), len(candidates) - 1)])
         self.draws += 1
         self.last_drawn[level] = self.draws
         return level, replay
@@ -119,7 +126,7 @@ class LevelReplay:
         """The chance that the next draw replays a scored level rather than exploring."""
         seen_share = float(self.seen.mean())
         if seen_share == 1.0:
-            return 1.0
+            return 1.0 if self.replay_when_all_scored else self.replay_prob
         if seen_share == 0.0 or seen_share < self.min_seen_share:
             return 0.0
         return self.replay_prob if self.schedule == "fixed" else min(seen_share, self.replay_prob)
@@ -144,8 +151,8 @@ class LevelReplay:
         replay = self.replay_chance()
         unseen = ~self.seen
         result = self.replay_probabilities() * replay
-        if unseen.any():
-            result[unseen] += (1.0 - replay) / unseen.sum()
+        explored = unseen if unseen.any() else np.ones(self.levels, dtype=bool)
+        result[explored] += (1.0 - replay) / explored.sum()
         return result
 
     def replay_probabilities(self) -> np.ndarray:

@@ -44,7 +44,7 @@ def test_the_replay_chance_is_the_seen_share_capped_by_replay_prob() -> None:
     assert plr.draw(np.array([0.39, 0.0, 0.0]))[1] is True
     assert plr.draw(np.array([0.41, 0.0, 0.0]))[1] is False
     plr.record(3, 1.0)
-    assert plr.draw(np.array([0.99, 0.0, 0.0]))[1] is True, "every level scored: nothing is left to explore"
+    assert plr.draw(np.array([0.41, 0.0, 0.0]))[1] is False, "every level scored: still replay_prob"
 
 
 def test_the_fixed_schedule_replays_at_replay_prob_once_a_level_has_a_score() -> None:
@@ -149,3 +149,16 @@ def test_learning_progress_samples_active_levels_by_sigmoid_of_z_scored_progress
     expected[active] = sigmoid / sigmoid.sum()
     np.testing.assert_allclose(lp.probabilities(), 0.8 * expected + 0.2 / 4)
     assert lp.probabilities()[2] == pytest.approx(0.05), "a level with no progress keeps only its uniform share"
+
+
+def test_once_every_level_has_a_score_plr_still_draws_uniformly_unless_robust() -> None:
+    plr = sampler(levels=4, replay_prob=0.25)
+    for level in range(4):
+        plr.record(level, float(level == 0))
+    assert plr.replay_chance() == 0.25, "Syllabus's decision: replay_prob of the draws replay"
+    replays = plr.replay_probabilities()
+    np.testing.assert_allclose(plr.probabilities(), 0.25 * replays + 0.75 / 4)
+    robust = sampler(levels=4, replay_prob=0.25, replay_when_all_scored=True)
+    for level in range(4):
+        robust.record(level, 1.0)
+    assert robust.replay_chance() == 1.0, "robust PLR trains on replays alone"
