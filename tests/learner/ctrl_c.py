@@ -7,11 +7,21 @@ import signal
 import subprocess
 import threading
 import time
+from pathlib import Path
 
 from spawned_processes import spawned_children
 
 START_TIMEOUT_S = 120
 STOP_TIMEOUT_S = 60
+
+
+def ignores_ctrl_c(pid: int) -> bool:
+    """Whether the process ignores SIGINT now (its ``SigIgn`` mask in /proc): the pool's parent does
+    while it starts a worker, so that the worker is born ignoring it, and a Ctrl-C then is lost."""
+    for line in Path(f"/proc/{pid}/status").read_text(encoding="ascii").splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) & (1 << (signal.SIGINT - 1)))
+    return False
 
 
 def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, str]:
@@ -31,9 +41,12 @@ def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, st
             time.sleep(0.05)
         # Past the pool's start, and still long before its workers have imported torch. The parent
         # ignores Ctrl-C while it starts a process, and starting one waits for the child to read its
-        # start-up data (the policy's weights among them): on a loaded machine a child took longer
-        # than the 0.2 s this waited before, and the Ctrl-C was lost (both full runs of 2026-11-29).
-        time.sleep(1.0)
+        # start-up data (the policy's weights among them): a fixed wait (0.2 s, then 1 s) was too short
+        # on a loaded machine in three full runs, and the Ctrl-C was lost; so wait until the parent
+        # listens again.
+        while ignores_ctrl_c(child.pid):
+            assert child.poll() is None and time.monotonic() < deadline, "".join(stderr)
+            time.sleep(0.02)
         os.killpg(child.pid, signal.SIGINT)
         code = child.wait(timeout=STOP_TIMEOUT_S)
     finally:
