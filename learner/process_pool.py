@@ -71,12 +71,13 @@ class StoppablePool(ProcessPoolExecutor):
         )
 
     def submit(self, fn: Callable[..., Result], /, *args: Any, **kwargs: Any) -> Future[Result]:
-        # The pool starts its processes as work is submitted, while it has fewer than it may have. Only
-        # those submits ignore Ctrl-C: a Ctrl-C that lands while it is ignored is lost, and ignoring it
-        # around every submit lost one pressed during a long run of submits (the Ctrl-C tests hung).
-        processes: dict[int, Any] = getattr(self, "_processes", None) or {}
-        if len(processes) < getattr(self, "_max_workers", 0):
+        # Every process starts at the first submit, in one window that ignores Ctrl-C: a Ctrl-C that
+        # lands while it is ignored is lost. Left to itself the pool starts a process only when none is
+        # idle, so it kept starting them (each submit ignoring Ctrl-C) well into a run of submits, and
+        # the Ctrl-C tests lost their Ctrl-C there; ignoring it around every submit lost them too.
+        if getattr(self, "_executor_manager_thread", True) is None:
             with _children_ignore_ctrl_c():
+                self._launch_processes()  # type: ignore[attr-defined]
                 return super().submit(fn, *args, **kwargs)
         return super().submit(fn, *args, **kwargs)
 
