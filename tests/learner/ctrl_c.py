@@ -27,8 +27,16 @@ def ignores_ctrl_c(pid: int) -> bool:
 def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, str]:
     """Run ``command``; once it has spawned ``workers`` processes, and while they are still importing,
     send SIGINT to its whole process group. Returns its exit code and everything it wrote to stderr."""
+    # A terminal starts a command with Ctrl-C at its default; the test process may be ignoring it (an
+    # earlier test in the same run left SIGINT ignored), and an ignored SIGINT is inherited, so the
+    # command would never hear it.
     child = subprocess.Popen(
-        command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True
+        command,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     assert child.stderr is not None
     stderr: list[str] = []
