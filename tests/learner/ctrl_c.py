@@ -49,9 +49,8 @@ def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, st
             time.sleep(0.05)
         # Past the pool's start, and still long before its workers have imported torch. The parent
         # ignores Ctrl-C while it starts a process, and starting one waits for the child to read its
-        # start-up data (the policy's weights among them): a fixed wait (0.2 s, then 1 s) was too short
-        # on a loaded machine in three full runs, and the Ctrl-C was lost; so wait until the parent
-        # listens again.
+        # start-up data (the policy's weights among them): a fixed wait (0.2 s, then 1 s) can be too
+        # short on a loaded machine, so wait until the parent listens again.
         while ignores_ctrl_c(child.pid):
             assert child.poll() is None and time.monotonic() < deadline, "".join(stderr)
             time.sleep(0.02)
