@@ -81,7 +81,10 @@ def test_hostile_requests_are_refused_fast_and_the_service_stays_responsive(
         elapsed = time.perf_counter() - started
         if not (400 <= response.status_code < 500 and elapsed < ANSWER_WITHIN_S):
             slow_or_accepted[what] = (response.status_code, round(elapsed, 3), response.text[:200])
-    time.sleep(0.1)
+    # The battery can be over before a poller on a loaded machine had its turn: let it finish five.
+    deadline = time.monotonic() + 5.0
+    while len(health_latencies) < 5 and time.monotonic() < deadline:
+        time.sleep(0.02)
     assert not slow_or_accepted, slow_or_accepted
     assert http.get("/curricula/hostile").status_code == 404
     assert len(health_latencies) >= 5
