@@ -179,10 +179,10 @@ class LearningProgress:
     progress the gap between them after the reweighting that stretches rates near 0 and 1.
 
     Outcomes gather between updates. The first update measures the untrained student: each level's
-    success rate then, capped at 0.75 so that no level is written off, is its baseline, and every
-    average starts at 0. Each later update folds each played level's rate above its baseline,
-    ``max(rate - baseline, 0) / (1 - baseline)``, into its averages, so a level's first successes
-    open a gap between them at once. Only the levels played since the last update move (Syllabus folds
+    success rate then, capped at 0.75 so that no level is written off, is its baseline, and both
+    averages start at the rate above it, ``max(rate - baseline, 0) / (1 - baseline)``: 0, except on a
+    level already passed more often than the cap. Each later update folds each played level's rate
+    above its baseline into its averages, so a level's first successes open a gap between them at once. Only the levels played since the last update move (Syllabus folds
     a rate of 0 into every level not played, which drags their averages down). Sampling: the levels
     with progress (or a success seen) get z-scored progress through a sigmoid, the rest nothing; that
     distribution is mixed with a ``uniform_share`` of uniform draws over all levels.
@@ -229,15 +229,16 @@ class LearningProgress:
 
     def update(self) -> None:
         """Fold the success rates since the last update into the moving averages (the first update
-        sets the baselines instead)."""
+        sets the baselines and starts the averages)."""
         played = self.episodes > 0
         rate = np.zeros(self.levels)
         rate[played] = self.successes[played] / self.episodes[played]
         if self.updates == 0:
             self.baseline = np.minimum(rate, self.BASELINE_CAP)
-            self.true_rate = rate
+        above = np.maximum(rate - self.baseline, 0.0) / (1.0 - self.baseline)
+        if self.updates == 0:
+            self.fast, self.slow, self.true_rate = above.copy(), above.copy(), rate
         else:
-            above = np.maximum(rate - self.baseline, 0.0) / (1.0 - self.baseline)
             alpha = self.ema_rate
             self.fast[played] = alpha * above[played] + (1 - alpha) * self.fast[played]
             # As Syllabus does: the slow average moves toward the new fast one, not toward the rate itself.

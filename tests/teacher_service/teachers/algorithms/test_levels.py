@@ -109,7 +109,7 @@ def test_learning_progress_starts_uniform_and_moves_its_averages_per_update() ->
         lp.record(0, success)
     lp.record(1, 0)
     lp.update()
-    assert lp.fast[0] == lp.slow[0] == 0.0, "the first update measures the baseline; every average starts at 0"
+    assert lp.fast[0] == lp.slow[0] == 0.0, "the first update measures the baseline; the averages start above it"
     assert lp.true_rate[0] == 0.75
     for success in (1, 1):
         lp.record(0, success)
@@ -131,9 +131,10 @@ def test_learning_progress_caps_the_baseline_so_a_passed_level_can_still_progres
     lp.record(0, 1)
     lp.update()
     assert lp.baseline[0] == LearningProgress.BASELINE_CAP
-    lp.record(0, 1)
+    assert lp.fast[0] == lp.slow[0] == 1.0, "as Syllabus: the averages start at the rate above the cap"
+    lp.record(0, 0)
     lp.update()
-    assert lp.fast[0] == 1.0
+    assert lp.fast[0] == 0.0
 
 
 def test_learning_progress_samples_active_levels_by_sigmoid_of_z_scored_progress() -> None:
