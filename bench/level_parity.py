@@ -8,6 +8,9 @@ agree and where they name a departure.
   first interval's baseline) against ``LearningProgress``, fed the same episodes with the same update
   interval, once with every level played in each interval (where they should agree) and once with a
   random half (where Syllabus folds a rate of 0 into the levels not played and we leave them be).
+- Learnability: Syllabus's ``Learnability`` with its defaults (top 1,000 levels by p(1 - p)) over the
+  side-by-side's 500 levels, given success rates from a stand-in evaluator, against uniform sampling:
+  with no more levels than its top-k it draws every level alike, whatever the rates.
 
     .venv/bin/python bench/level_parity.py [--out FILE]
 """
@@ -78,6 +81,21 @@ def learning_progress_case(rng: np.random.Generator, played_share: float, interv
     return total_variation(np.asarray(theirs._sample_distribution(), dtype=float), ours.probabilities())
 
 
+def learnability_case(rng: np.random.Generator, levels: int = 500) -> float:
+    """Total variation between Syllabus's default ``Learnability`` over ``levels`` and uniform."""
+    from syllabus.curricula import Learnability
+    from syllabus.task_space import DiscreteTaskSpace
+
+    rates = rng.uniform(0.0, 1.0, size=levels)
+
+    class StandInEvaluator:  # what Learnability reads of an evaluation: each level's success rate
+        def evaluate_agent(self, num_episodes: int, verbose: bool = False) -> tuple[None, np.ndarray, np.ndarray, None]:
+            return None, rates, rates, None
+
+    theirs = Learnability(StandInEvaluator(), DiscreteTaskSpace(levels))
+    return total_variation(np.asarray(theirs._sample_distribution(), dtype=float), np.ones(levels))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="also write the figures here as JSON")
@@ -91,6 +109,7 @@ def main() -> int:
         "plr, a third of the scored levels at score 0 (ties with the unscored)",
         "learning progress, every level played each interval",
         "learning progress, a random half played each interval",
+        "Syllabus learnability, its defaults over 500 levels, against uniform",
     )}  # fmt: skip
     names = list(cases)
     for _ in range(args.repeats):
@@ -104,6 +123,7 @@ def main() -> int:
         cases[names[2]].append(plr_case(rng, zeroed, seen, 0.3, 0.0))
         cases[names[3]].append(learning_progress_case(rng, 1.0))
         cases[names[4]].append(learning_progress_case(rng, 0.5))
+        cases[names[5]].append(learnability_case(rng))
     figures = {
         name: {"mean": round(float(np.mean(values)), 4), "max": round(float(np.max(values)), 4)}
         for name, values in cases.items()
