@@ -3,16 +3,15 @@ teacher snapshots. It owns every SQL string and the mapping between rows and typ
 rest of the service hands it records (``NewTask``, ``NewResult``, ``StoredFit``,
 ``TeacherSnapshot``) and gets records back, never rows or SQL.
 
-Every write is committed before the request that made it is answered. Writes are group-committed:
-whatever the loop queued while handling one round of ready requests goes into one transaction, its
-statements run on the event loop, and only its ``COMMIT`` (the disk sync, milliseconds of waiting
-for a fraction of a millisecond of CPU) runs on a thread of its own, so the loop serves requests
-meanwhile; the writes they queue make the next group, begun once this one is committed. (Running
-every statement on a writer thread was measured and rejected: each SQLite call hands the GIL back
-and forth with a busy event loop, and the waits swamp the commits.) Writes complete, and their
-``on_commit`` callbacks run, in the order they were submitted: the teachers see results in exactly
-the order they are stored, which is the order a replay feeds them back. Reads go through a
-connection of their own, which sees only committed writes.
+Every write is committed before the request that made it is answered. Writes are group-committed
+on the event loop: whatever the loop queued while handling one round of ready requests goes into
+one transaction, committed right after that round, so a disk sync is shared by every request in
+it. (A writer thread was measured and rejected: each SQLite call hands the GIL back and forth with
+a busy event loop, and the waits swamp the commits. So was a thread for the ``COMMIT`` alone, the
+statements staying on the loop: at 1,000 simulated workers it cost the main process 12% more CPU per
+result and doubled p99, the results page's "A fleet on one service".) Writes complete, and their ``on_commit``
+callbacks run, in the order they were submitted: the teachers see results in exactly the order
+they are stored, which is the order a replay feeds them back.
 
 What a restart reads (schema version 3): per curriculum, its newest snapshot (one row: the
 teacher's exported state, the service's counters and awaited task indices, and the sequence
@@ -29,8 +28,6 @@ import asyncio
 import json
 import logging
 import sqlite3
-from concurrent.futures import Future, ThreadPoolExecutor
-from concurrent.futures import wait as wait_for
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -321,26 +318,21 @@ class _Write:
 
 
 class Store:
-    """The service's database. ``save_replayed_now`` is for startup; once ``start`` has run, every
-    write is queued on the event loop thread and group-committed (``add_*``, ``put_snapshot_later``)."""
+    """The service's database. Reads and ``save_replayed_now`` are for startup; once ``start`` has
+    run, every write is queued on the event loop thread and group-committed (``add_*``,
+    ``put_snapshot_later``)."""
 
     def __init__(self, path: Path, synchronous: Literal["FULL", "NORMAL"] = "FULL") -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
-        # Used by one thread at a time: the loop, or the committing thread while the loop waits for it.
-        self._db = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+        self._db = sqlite3.connect(path, isolation_level=None)
         if self._db.execute("PRAGMA journal_mode=WAL").fetchone()[0] != "wal":
             raise StoreError(f"{path}: SQLite could not switch to WAL mode")
         self._db.execute(f"PRAGMA synchronous={synchronous}")
         self._db.execute("PRAGMA foreign_keys=ON")
         self._migrate()
-        self._reads = sqlite3.connect(path, isolation_level=None)
-        self._reads.execute("PRAGMA query_only=ON")
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._committer: ThreadPoolExecutor | None = None
         self._pending: list[_Write] = []
-        self._in_flight: tuple[list[_Write], Future[Any]] | None = None
-        """The group whose COMMIT runs on the committing thread; no other group begins meanwhile."""
         self.writes_failing: str | None = None
         """Why the last commit failed (a full disk, a read-only file); None once one succeeds."""
 
@@ -355,11 +347,11 @@ class Store:
             self._db.executescript(f"BEGIN; {_MIGRATIONS[step]} PRAGMA user_version = {step + 1}; COMMIT;")
 
     def curricula(self) -> list[StoredCurriculum]:
-        rows = self._reads.execute("SELECT id, name, spec, created_at FROM curricula ORDER BY id")
+        rows = self._db.execute("SELECT id, name, spec, created_at FROM curricula ORDER BY id")
         return [StoredCurriculum(*row) for row in rows]
 
     def snapshot(self, curriculum_id: int) -> StoredSnapshot | None:
-        row = self._reads.execute(
+        row = self._db.execute(
             "SELECT results_seen, last_seq, tasks_issued, issued_through, outstanding, fits_waiting, history_rows,"
             " teacher FROM snapshots WHERE curriculum_id = ?",
             (curriculum_id,),
@@ -380,7 +372,7 @@ class Store:
 
     def history(self, curriculum_id: int, rows: int, start: int = 0) -> np.ndarray:
         """History rows ``start`` to ``rows``, from the chunks written with the snapshots."""
-        chunks = self._reads.execute(
+        chunks = self._db.execute(
             "SELECT first_row, row_count, width, data FROM history_chunks"
             " WHERE curriculum_id = ? AND first_row < ? AND first_row + row_count > ? ORDER BY first_row",
             (curriculum_id, rows, start),
@@ -416,7 +408,7 @@ class Store:
 
     def tasks_from(self, curriculum_id: int, first_index: int) -> list[StoredTask]:
         """Issued tasks from ``first_index`` on, in index order."""
-        rows = self._reads.execute(
+        rows = self._db.execute(
             "SELECT task_index, results_seen FROM tasks WHERE curriculum_id = ? AND task_index >= ?"
             " ORDER BY task_index",
             (curriculum_id, first_index),
@@ -424,7 +416,7 @@ class Store:
         return [StoredTask(*row) for row in rows]
 
     def result_count(self, curriculum_id: int, after_seq: int = 0) -> int:
-        row = self._reads.execute(
+        row = self._db.execute(
             "SELECT count(*) FROM results WHERE curriculum_id = ? AND seq > ?", (curriculum_id, after_seq)
         ).fetchone()
         count: int = row[0]
@@ -433,7 +425,7 @@ class Store:
     def results(self, curriculum_id: int, after_seq: int = 0) -> Iterator[StoredResult]:
         """Accepted results stored after ``after_seq``, in the order the teacher learned from them,
         with the tasks they answer."""
-        rows = self._reads.execute(
+        rows = self._db.execute(
             f"{_SELECT_RESULTS} WHERE r.curriculum_id = ? AND r.seq > ? ORDER BY r.seq", (curriculum_id, after_seq)
         )
         for row in rows:
@@ -444,11 +436,11 @@ class Store:
         index order: the tasks a restart may still await results for."""
         lookup = "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index = ?"
         for index in indices:
-            row = self._reads.execute(lookup, (curriculum_id, index)).fetchone()
+            row = self._db.execute(lookup, (curriculum_id, index)).fetchone()
             if row is None:
                 raise StoreError(f"{self.path}: curriculum {curriculum_id} has no task {index}")
             yield AwaitedTask(row[0], json.loads(row[1]), row[2])
-        rows = self._reads.execute(
+        rows = self._db.execute(
             "SELECT task_index, params, issued_at FROM tasks WHERE curriculum_id = ? AND task_index >= ?"
             " ORDER BY task_index",
             (curriculum_id, first_index),
@@ -459,7 +451,7 @@ class Store:
     def answered_tasks(self, curriculum_id: int, indices: list[int]) -> set[int]:
         """Which of these tasks have a stored result (at most ``MAX_RESULTS_PER_REQUEST`` of them)."""
         marks = ", ".join("?" * len(indices))  # placeholders only: the values stay bound parameters
-        rows = self._reads.execute(
+        rows = self._db.execute(
             f"SELECT task_index FROM results WHERE curriculum_id = ? AND task_index IN ({marks})",
             (curriculum_id, *indices),
         )
@@ -467,14 +459,14 @@ class Store:
 
     def recent_results(self, curriculum_id: int, limit: int) -> list[StoredResult]:
         """The last ``limit`` results, oldest first."""
-        rows = self._reads.execute(
+        rows = self._db.execute(
             f"{_SELECT_RESULTS} WHERE r.curriculum_id = ? ORDER BY r.seq DESC LIMIT ?", (curriculum_id, limit)
         ).fetchall()
         return [_result(row) for row in reversed(rows)]
 
     def fits_since(self, curriculum_id: int, results_seen: int) -> list[StoredFit]:
         """Fits installed (or failed) once the teacher had seen ``results_seen`` results, with their models."""
-        rows = self._reads.execute(
+        rows = self._db.execute(
             f"SELECT {_FIT_COLUMNS}, model FROM fits WHERE curriculum_id = ? AND results_seen >= ? ORDER BY fit_index",
             (curriculum_id, results_seen),
         )
@@ -482,14 +474,14 @@ class Store:
 
     def recent_fits(self, curriculum_id: int, limit: int) -> list[StoredFit]:
         """The last ``limit`` fits without their models, oldest first."""
-        rows = self._reads.execute(
+        rows = self._db.execute(
             f"SELECT {_FIT_COLUMNS} FROM fits WHERE curriculum_id = ? ORDER BY fit_index DESC LIMIT ?",
             (curriculum_id, limit),
         ).fetchall()
         return [StoredFit(*row) for row in reversed(rows)]
 
     def fit_count(self, curriculum_id: int) -> int:
-        row = self._reads.execute("SELECT count(*) FROM fits WHERE curriculum_id = ?", (curriculum_id,)).fetchone()
+        row = self._db.execute("SELECT count(*) FROM fits WHERE curriculum_id = ?", (curriculum_id,)).fetchone()
         count: int = row[0]
         return count
 
@@ -500,9 +492,8 @@ class Store:
         self._write_now([(_INSERT_FIT, fit_rows), *_snapshot_statements(curriculum_id, snapshot)])
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """From now on, writes are grouped on ``loop`` and their commits run on a thread."""
+        """From now on, writes are grouped and committed on ``loop``."""
         self._loop = loop
-        self._committer = ThreadPoolExecutor(1, thread_name_prefix="store-commit")
 
     def add_curriculum(self, curriculum: StoredCurriculum, on_abort: Callback = None) -> asyncio.Future[None]:
         row = (curriculum.id, curriculum.name, curriculum.spec, curriculum.created_at)
@@ -575,16 +566,8 @@ class Store:
         self._queue(_Write(statements, None, on_commit, on_abort))
 
     def close(self) -> None:
-        """Commit what is queued, then close the database; on the loop thread, the loop not running."""
-        if self._in_flight is None:
-            self._flush()
-        while self._in_flight is not None:  # each committed group begins the next, until none is queued
-            commit = self._in_flight[1]
-            wait_for([commit])
-            self._committed(commit)
-        if self._committer is not None:
-            self._committer.shutdown()
-        self._reads.close()
+        """Commit what is queued, then close the database."""
+        self._flush()
         self._db.close()
 
     def _queue(self, write: _Write) -> None:
@@ -594,34 +577,19 @@ class Store:
         self._pending.append(write)
 
     def _flush(self) -> None:
-        """Begin the queued writes as one group and hand its COMMIT to the committing thread. While a
-        group is in flight the queue waits: that group's ``_committed`` begins it."""
-        if self._in_flight is not None:
-            return
         group, self._pending = self._pending, []
-        if not group:
-            return
-        try:
-            begun = self._begin(group)
-        except BaseException:
-            self._complete(group)
-            raise
-        if not begun:
-            self._complete(group)
-            return
-        assert self._committer is not None and self._loop is not None
-        loop = self._loop
-        commit = self._committer.submit(self._db.execute, "COMMIT")
-        self._in_flight = (group, commit)
-        commit.add_done_callback(lambda _: _call_soon_threadsafe(loop, self._committed, commit))
+        if group:
+            try:
+                self._commit(group)
+            finally:
+                self._complete(group)
 
-    def _begin(self, group: list[_Write]) -> bool:
-        """Run the group's statements in one open transaction, ready for its COMMIT; a write whose
-        statements fail is rolled back alone.
+    def _commit(self, group: list[_Write]) -> None:
+        """Commit the group in one transaction; a write whose statements fail is rolled back alone.
 
-        Any other failure (of BEGIN or a savepoint; SQLite, I/O or anything else) rolls the whole
-        group back, fails every write of it and returns False: a transaction left open would keep
-        every later write from starting, and requests waiting on this group would never be answered.
+        Any other failure (of BEGIN, a savepoint or COMMIT; SQLite, I/O or anything else) rolls the
+        whole group back and fails every write of it: a transaction left open would keep every later
+        write from starting, and requests waiting on this group would never be answered.
         """
         try:
             if self._db.in_transaction:  # left open by a failure whose rollback failed too
@@ -638,34 +606,16 @@ class Store:
                     self._db.execute("ROLLBACK TO one_write")
                     write.error = error
                 self._db.execute("RELEASE one_write")
+            self._db.execute("COMMIT")
+            self.writes_failing = None
         except BaseException as error:
-            self._fail(group, error)
+            log.exception("commit of %d writes failed", len(group))
+            self.writes_failing = _reason(error)
+            self._roll_back()
+            for write in group:
+                write.error = write.error or error
             if not isinstance(error, Exception):
                 raise
-            return False
-        return True
-
-    def _committed(self, commit: Future[Any]) -> None:
-        """The group in flight is committed, or its COMMIT failed (and the whole group with it):
-        answer its writes, then begin the writes queued meanwhile. On the loop."""
-        if self._in_flight is None or self._in_flight[1] is not commit:
-            return  # ``close`` has finished it already
-        group, self._in_flight = self._in_flight[0], None
-        error = commit.exception()
-        if error is None:
-            self.writes_failing = None
-        else:
-            self._fail(group, error)
-        self._complete(group)
-        if self._pending:
-            self._flush()
-
-    def _fail(self, group: list[_Write], error: BaseException) -> None:
-        log.error("commit of %d writes failed", len(group), exc_info=error)
-        self.writes_failing = _reason(error)
-        self._roll_back()
-        for write in group:
-            write.error = write.error or error
 
     def _roll_back(self) -> None:
         try:
@@ -696,14 +646,6 @@ class Store:
                     write.future.set_result(None)
                 else:
                     write.future.set_exception(outcome)
-
-
-def _call_soon_threadsafe(loop: asyncio.AbstractEventLoop, callback: Callable[..., object], *args: Any) -> None:
-    """Hand ``callback`` to the loop from another thread; a loop already closed has nobody left to tell."""
-    try:
-        loop.call_soon_threadsafe(callback, *args)
-    except RuntimeError:
-        log.debug("the event loop closed before a commit finished; close() completes its writes")
 
 
 def _reason(error: BaseException) -> str:

@@ -174,52 +174,6 @@ def test_every_write_of_a_failed_group_is_answered(service: InProcessService, ku
         assert all(_draw(after, name, 1).status_code == 200 for name in names)
 
 
-class SlowCommits:
-    """The store's SQLite connection, with every COMMIT taking ``delay_s`` longer, as on a slow disk."""
-
-    def __init__(self, db: sqlite3.Connection, delay_s: float) -> None:
-        self.db = db
-        self.delay_s = delay_s
-
-    def execute(self, sql: str, *args: Any) -> sqlite3.Cursor:
-        if sql == "COMMIT":
-            time.sleep(self.delay_s)
-        return self.db.execute(sql, *args)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.db, name)
-
-
-def test_the_service_answers_other_requests_while_a_commit_waits_for_the_disk(
-    service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]
-) -> None:
-    """The commit runs on a thread of its own: a slow disk delays only the writes that wait for it,
-    and writes that arrive meanwhile share the next commit, each stored and answered."""
-    _create(http, "slow", kuka_space)
-    tasks = _draw(http, "slow", 40).json()["tasks"]
-    database = service.store._db
-    service.on_loop(lambda: setattr(service.store, "_db", SlowCommits(database, delay_s=1.5)))
-
-    def report(part: list[dict[str, Any]]) -> dict[str, Any]:
-        with httpx.Client(base_url=http.base_url, headers=http.headers, timeout=ANSWER_WITHIN_S) as client:
-            return client.post("/curricula/slow/results", json=_results(part)).json()
-
-    with ThreadPoolExecutor(4) as pool:
-        first = pool.submit(report, tasks[:10])
-        time.sleep(0.3)  # the first report's commit is on the disk now
-        later = [pool.submit(report, tasks[start : start + 10]) for start in (10, 20, 30)]
-        started = time.monotonic()
-        assert http.get("/curricula/slow").status_code == 200
-        assert http.get(f"{service.url}/healthz").json()["status"] == "ok"
-        answered_in = time.monotonic() - started
-        assert not first.done(), "the slow commit was over before the reads were answered"
-        acks = [first.result(), *(reply.result() for reply in later)]
-    assert answered_in < 0.5, f"reads waited {answered_in:.2f} s for a commit"
-    assert acks == [{"accepted": 10, "duplicates": 0, "expired": 0}] * 4
-    assert _stored_results(service.store.path, "slow") == {task["task_id"] for task in tasks}
-    assert http.get("/curricula/slow").json()["counters"]["results_received"] == 40
-
-
 def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_room(
     service: InProcessService, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
 ) -> None:
