@@ -182,8 +182,9 @@ class LearningProgress:
     success rate then, capped at 0.75 so that no level is written off, is its baseline, and both
     averages start at the rate above it, ``max(rate - baseline, 0) / (1 - baseline)``: 0, except on a
     level already passed more often than the cap. Each later update folds each played level's rate
-    above its baseline into its averages, so a level's first successes open a gap between them at once. Only the levels played since the last update move (Syllabus folds
-    a rate of 0 into every level not played, which drags their averages down). Sampling: the levels
+    above its baseline into its averages, so a level's first successes open a gap between them at
+    once. Only the levels played since the last update move (Syllabus folds a rate of 0 into every
+    level not played, which drags their averages down). Sampling: the levels
     with progress (or a success seen) get z-scored progress through a sigmoid, the rest nothing; that
     distribution is mixed with a ``uniform_share`` of uniform draws over all levels.
     """
