@@ -8,10 +8,10 @@ on the event loop: whatever the loop queued while handling one round of ready re
 one transaction, committed right after that round, so a disk sync is shared by every request in
 it. (A writer thread was measured and rejected: each SQLite call hands the GIL back and forth with
 a busy event loop, and the waits swamp the commits. So was a thread for the ``COMMIT`` alone, the
-statements staying on the loop: at 1,000 simulated workers it cost the main process 12% more CPU per
-result and doubled p99, the results page's "A fleet on one service".) Writes complete, and their ``on_commit``
-callbacks run, in the order they were submitted: the teachers see results in exactly the order
-they are stored, which is the order a replay feeds them back.
+statements staying on the loop: at 1,000 simulated workers it cost the main process 12 to 16% more
+CPU per result and raised p99 by half to nearly double, the results page's "A fleet on one service".)
+Writes complete, and their ``on_commit`` callbacks run, in the order they were submitted: the
+teachers see results in exactly the order they are stored, which is the order a replay feeds them back.
 
 What a restart reads (schema version 3): per curriculum, its newest snapshot (one row: the
 teacher's exported state, the service's counters and awaited task indices, and the sequence
