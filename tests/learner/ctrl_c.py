@@ -27,9 +27,9 @@ def ignores_ctrl_c(pid: int) -> bool:
 def ctrl_c_as_the_pool_starts(command: list[str], workers: int) -> tuple[int, str]:
     """Run ``command``; once it has spawned ``workers`` processes, and while they are still importing,
     send SIGINT to its whole process group. Returns its exit code and everything it wrote to stderr."""
-    # A terminal starts a command with Ctrl-C at its default; the test process may be ignoring it (an
-    # earlier test in the same run left SIGINT ignored), and an ignored SIGINT is inherited, so the
-    # command would never hear it.
+    # A terminal starts a command with Ctrl-C at its default; the test process may be ignoring it (a
+    # run started as a background job of a non-interactive shell is; no test was found to leave it so),
+    # and an ignored SIGINT is inherited, so the command would never hear it.
     child = subprocess.Popen(
         command,
         stdout=subprocess.DEVNULL,
