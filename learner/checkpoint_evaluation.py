@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import math
 import os
-from concurrent.futures import as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -261,7 +260,7 @@ def evaluate_policy(
                 initargs=(snapshot, task, max_episode_steps, env_id),
             ) as pool:
                 futures = {pool.submit(_play_episode, each): index for index, each in enumerate(seeds)}
-                for future in as_completed(futures):
+                for future in pool.as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
     # Every index was filled above: the loop or the pool answered each seed.

@@ -143,7 +143,7 @@ def main() -> None:
         }
         played = {}
         for policy, parts in futures.items():
-            played[policy] = [episode for part in parts for episode in part.result()]
+            played[policy] = [episode for part in parts for episode in pool.result(part)]
             row, records[policy] = summarise(policy, played[policy])
             print(row, flush=True)
     held = np.array([[x, y] for episodes in played.values() for lifted, _, x, y in episodes if lifted])

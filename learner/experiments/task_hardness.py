@@ -139,7 +139,7 @@ def main() -> None:
         }
         print(f"{args.env}, {args.episodes} episodes per point and policy, episode seeds {seeds[0]} to {seeds[-1]}")
         for (name, policy), parts in futures.items():
-            episodes = [episode for part in parts for episode in part.result()]
+            episodes = [episode for part in parts for episode in pool.result(part)]
             successes = sum(success for success, _, _ in episodes)
             interval = wilson_interval(successes, len(episodes))
             mean_return = float(np.mean([total for _, total, _ in episodes]))

@@ -1,4 +1,5 @@
-"""The evaluation pool's workers do not outlive a parent killed with SIGKILL."""
+"""The evaluation pool's workers do not outlive a parent killed with SIGKILL, and its parent answers
+Ctrl-C only where the executor holds no lock."""
 
 from __future__ import annotations
 
@@ -7,7 +8,12 @@ import signal
 import subprocess
 import sys
 import time
+from multiprocessing import get_context
 from pathlib import Path
+
+import pytest
+
+from learner.process_pool import StoppablePool
 
 PARENT = """
 import os, time
@@ -52,3 +58,31 @@ def test_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> None:
     for pid in orphans:
         os.kill(pid, signal.SIGKILL)
     assert not orphans, f"workers {orphans} outlived their killed parent"
+
+
+def test_a_ctrl_c_inside_the_pool_is_held_until_a_safe_point_and_raised_there() -> None:
+    reached_the_safe_point = False
+    with pytest.raises(KeyboardInterrupt), StoppablePool(2, mp_context=get_context("spawn")) as pool:
+        futures = [pool.submit(pow, 2, power) for power in range(8)]
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.3)  # stands for the executor's own code, where a KeyboardInterrupt could strand a lock
+        reached_the_safe_point = True
+        for _ in pool.as_completed(futures):
+            pass
+    assert reached_the_safe_point
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_held_ctrl_c_goes_to_the_handler_the_pool_replaced_which_may_let_the_work_go_on() -> None:
+    heard: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: heard.append(signum))
+    try:
+        with StoppablePool(2, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(pow, 2, power) for power in range(8)]
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.3)
+            assert not heard
+            results = sorted(pool.result(future) for future in futures)
+        assert heard == [signal.SIGINT] and results == [2**power for power in range(8)]
+    finally:
+        signal.signal(signal.SIGINT, previous)
