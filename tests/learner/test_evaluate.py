@@ -18,7 +18,13 @@ from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE
 from common.policy.actor_critic import InferencePolicy
 from kuka_curriculum import main
 from learner.checkpoint_arguments import parse_task
-from learner.checkpoint_evaluation import EvaluationResult, describe_task, evaluate_policy, scripted_evaluation
+from learner.checkpoint_evaluation import (
+    EvaluationResult,
+    describe_task,
+    evaluate_policy,
+    scripted_evaluation,
+    significant,
+)
 from learner.core.checkpoint import load_checkpoint
 from learner.core.kuka_policy import policy_snapshot
 from learner.episode_diagnostics import success_by_band
@@ -59,7 +65,7 @@ def test_evaluate_prints_and_writes_intervals_of_the_episodes_it_played(checkpoi
         env, InferencePolicy(policy_snapshot(load_checkpoint(checkpoint))), KUKA_TASK_SPACE.hardest(), range(7, 12)
     )
     env.close()
-    assert per_episode["return"] == [episode.reward for episode in expected]
+    assert per_episode["return"] == [significant(episode.reward) for episode in expected]
 
 
 def test_results_do_not_depend_on_how_many_processes_share_the_episodes(checkpoint):
@@ -109,7 +115,7 @@ def test_a_checkpoint_plays_the_environment_it_was_trained_on(checkpoint, tmp_pa
         env, InferencePolicy(policy_snapshot(load_checkpoint(hard))), KUKA_HARD_TASK_SPACE.hardest(), range(3)
     )
     env.close()
-    assert written["per_episode"]["return"] == [episode.reward for episode in expected]
+    assert written["per_episode"]["return"] == [significant(episode.reward) for episode in expected]
 
     assert main(["evaluate", str(hard), "--episodes", "1", "--task", "easiest,obj_far=0.5", "--json", str(out)]) == 0
     assert json.loads(out.read_text())["task"] == {**KUKA_HARD_TASK_SPACE.easiest(), "obj_far": 0.5}
@@ -130,12 +136,19 @@ def test_each_episode_records_where_its_block_lay_and_the_scripted_controller_pl
     written = json.loads(out.read_text())
     per_episode, scripted = written["per_episode"], written["scripted"]
     assert all(len(per_episode[name]) == 3 for name in DIAGNOSTICS)
+    # Each per-episode column is one line of floats cut to six digits.
+    lines = out.read_text().splitlines()
+    assert sum(line.strip().startswith('"block_x": [') and line.endswith("],") for line in lines) == 2
+    mantissas = [
+        repr(value).split("e")[0].replace("-", "").replace(".", "").lstrip("0") for value in per_episode["block_x"]
+    ]
+    assert all(len(digits) <= 6 for digits in mantissas)
     # The same seeds put the block in the same places for the policy and the scripted controller.
     env = make_kuka_env(HARD_V1_ENV_ID)
     placements = []
     for seed in range(100000, 100003):
         env.reset(seed=seed, options={"task": KUKA_HARD_V1_TASK_SPACE.hardest()})
-        placements.append(env.block_pose())
+        placements.append(tuple(significant(value) for value in env.block_pose()))
     assert [tuple(per_episode[name][i] for name in DIAGNOSTICS[:3]) for i in range(3)] == placements
     assert scripted["controller"] == "scripted" and scripted["seed"] == 100000
     assert [scripted["per_episode"][name] for name in DIAGNOSTICS[:4]] == [
@@ -159,11 +172,13 @@ def test_each_episode_records_where_its_block_lay_and_the_scripted_controller_pl
     env.close()
     assert played["controller"] == "scripted" and played["env"] == HARD_V1_ENV_ID
     assert played["per_episode"]["success"] == [episode.success for episode in expected]
-    assert played["per_episode"]["off_square_degrees"] == [e.diagnostics.off_square_degrees for e in expected]
+    assert played["per_episode"]["off_square_degrees"] == [
+        significant(e.diagnostics.off_square_degrees) for e in expected
+    ]
     assert played["per_episode"]["block_x"] == per_episode["block_x"][:2]
     # Played to its touchdowns, the wrist's turns are recorded and read back.
     turns = played["per_episode"]["touchdown_wrist_turn_degrees"]
-    assert turns == [e.diagnostics.touchdown_wrist_turn_degrees for e in expected] and None not in turns
+    assert turns == [significant(e.diagnostics.touchdown_wrist_turn_degrees) for e in expected] and None not in turns
     assert [each.touchdown_wrist_turn_degrees for each in EvaluationResult.from_dict(played).diagnostics] == turns
     assert "scripted controller: KukaGraspHard-v1, hardest task, 2 episodes" in capsys.readouterr().out
 
