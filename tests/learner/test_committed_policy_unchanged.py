@@ -18,7 +18,12 @@ from learner.core.checkpoint import load_checkpoint
 from learner.core.kuka_policy import policy_snapshot
 
 MODEL = Path(__file__).parents[2] / "models" / "alp-gmm-3m-seed2.pt"
-RECORDED_DIGEST = "7b63a0e80c20bd017b870f4a4fd055db9f40aaebd6b95bc95fe1cbed8eeec953"
+RECORDED_DIGESTS = {
+    "7b63a0e80c20bd017b870f4a4fd055db9f40aaebd6b95bc95fe1cbed8eeec953": "where it was first recorded (issue 58)",
+    "ec55f54c301512655e946a9dfa3864144030e8ef026b5affa489f2a44f96bff4": "AMD EPYC, from the landed a828c48 too",
+}
+"""One digest per floating-point path: float32 matmuls round differently with the CPU's vector width, so a
+new kind of machine records its own digest from an unchanged commit; a change that moves a bit fails on all."""
 
 
 def acted_digest() -> str:
@@ -34,4 +39,4 @@ def acted_digest() -> str:
 
 
 def test_the_committed_policy_acts_bit_for_bit_as_recorded() -> None:
-    assert acted_digest() == RECORDED_DIGEST
+    assert acted_digest() in RECORDED_DIGESTS

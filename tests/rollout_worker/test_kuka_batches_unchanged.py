@@ -18,7 +18,12 @@ from common.policy.actor_critic import ActorCritic, InferencePolicy, PolicySpec,
 from common.policy.normalizer import RunningNormalizer
 from rollout_worker.sampler import Sampler, ScoreDiscount
 
-RECORDED_DIGEST = "bde78193b75585edbb555ebf0030164d5ac9a81cd5ee9860242f928518320284"
+RECORDED_DIGESTS = {
+    "bde78193b75585edbb555ebf0030164d5ac9a81cd5ee9860242f928518320284": "where it was first recorded (issue 58)",
+    "acfd0443e9460b25978c9dae49b0e46ba16662c8ead3085708f41985f286260f": "AMD EPYC, from the landed a828c48 too",
+}
+"""One digest per floating-point path: float32 matmuls round differently with the CPU's vector width, so a
+new kind of machine records its own digest from an unchanged commit; a change that moves a bit fails on all."""
 ARRAYS = ("observations", "actions", "log_probs", "values", "rewards", "terminated", "truncated", "final_values")
 
 
@@ -61,4 +66,4 @@ def sampled_digest(score_discount: ScoreDiscount | None) -> str:
 
 @pytest.mark.parametrize("score_discount", [None, ScoreDiscount(0.999, 0.99)], ids=["unscored", "scored"])
 def test_kuka_batches_are_bit_for_bit_as_recorded(score_discount: ScoreDiscount | None) -> None:
-    assert sampled_digest(score_discount) == RECORDED_DIGEST
+    assert sampled_digest(score_discount) in RECORDED_DIGESTS
