@@ -75,6 +75,8 @@ RECOVERY_TIMEOUT_S = 600.0
 AFTERMATH_S = 120.0
 """How long after a fault the restarts of other roles are counted as its consequences."""
 FILLER = "chaos-filler"
+STUCK_LOG_LINES = 25
+"""Of each role's log, in the error when the stack never trains."""
 
 
 # --- the stack ------------------------------------------------------------------------------------
@@ -316,6 +318,30 @@ def watch_recovery(stack: Stack, observer: Observer, fault: Fault) -> None:
 
 def now_s_past(fault: Fault, seconds: float) -> bool:
     return time.time() > fault.started + seconds
+
+
+def stuck_at_start(stack: Stack, artifacts: Path | None) -> str:
+    """What a stack that never trained was doing: each container's state, Ray's and the tail of every log.
+
+    The whole compose log goes to ``artifacts`` too; the tail is in the error so that a CI log shows it.
+    """
+    states = stack.inspect(*(c for s in ROLES + ("tensorboard",) for c in stack.containers(s)))
+    lines = [
+        f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
+        f"health {state['health']})"
+        for state in sorted(states.values(), key=lambda state: state["name"])
+    ]
+    if artifacts:
+        artifacts.mkdir(parents=True, exist_ok=True)
+        (artifacts / "compose.log").write_text(stack.compose("logs", "--no-color", "--timestamps", timeout=120))
+    for head in stack.containers("ray-head"):
+        # The cluster's own view: which nodes it counts alive, and any actor still waiting for a place.
+        status = run(["docker", "exec", head, "ray", "status"], timeout=60, check=False)
+        lines += ["--- `ray status` on the head:", status.rstrip()]
+    for service in ("learner", "ray-head", "ray-worker", "teacher"):
+        tail = stack.compose("logs", "--no-color", "--timestamps", "--tail", str(STUCK_LOG_LINES), service)
+        lines += [f"--- the last {STUCK_LOG_LINES} lines of {service}'s log:", tail.rstrip()]
+    return "\n".join(lines)
 
 
 def learner_finished(stack: Stack) -> bool:
@@ -575,6 +601,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--disk-full-for", type=float, default=120.0)
     parser.add_argument("--volume-mb", type=int, default=512, help="the teacher's file system")
     parser.add_argument("--min-faults", type=int, default=20, help="faults that must be done for a pass")
+    parser.add_argument("--start-timeout", type=float, default=600.0, help="from `up` to the first iteration")
     parser.add_argument("--finish-timeout", type=float, default=1800.0, help="after the faults, for the budget")
     parser.add_argument("--project", default="kcchaos", help="the compose project name")
     parser.add_argument("--out", type=Path, help="write the results here as JSON")
@@ -615,10 +642,13 @@ def main(argv: list[str] | None = None) -> int:
         stack.prepare()
         up_at = time.time()
         stack.compose("up", "--detach", "--no-build", "--scale", "ray-worker=2", timeout=600)
-        deadline = time.time() + 600
+        deadline = time.time() + args.start_timeout
         while not metrics(stack, run_name):
             if time.time() > deadline:
-                raise RuntimeError("the learner logged no iteration within 600 s of `up`")
+                raise RuntimeError(
+                    f"the learner logged no iteration within {args.start_timeout:.0f} s of `up`\n"
+                    + stuck_at_start(stack, args.artifacts)
+                )
             time.sleep(2.0)
         started = time.time()
         report["up_to_first_iteration_s"] = started - up_at
