@@ -66,6 +66,7 @@ TOKEN = "chaos-bench-teacher-token"
 TEACHER_URL = "http://127.0.0.1:8000"
 RAY_DASHBOARD_URL = "http://127.0.0.1:8265/"
 ROLES = ("teacher", "learner", "ray-head", "ray-worker")
+SERVICES = (*ROLES, "tensorboard")
 KINDS = ("kill", "restart")
 TRAIN_ARGS = "--max-episode-steps=100 --rollout-length=256 --eval-every=0 --checkpoint-every=2"
 """As tests/test_docker_stack.py: 100-step episodes and 2,048-step iterations, a checkpoint every two."""
@@ -170,6 +171,16 @@ class Stack:
                 "name": data["Name"].lstrip("/"),
             }
         return states
+
+    def states(self) -> dict[str, dict[str, Any]]:
+        """Every container of every service, by id (``inspect``'s fields)."""
+        return self.inspect(*(c for service in SERVICES for c in self.containers(service)))
+
+    def save_log(self, artifacts: Path) -> None:
+        """The whole ``docker-compose logs`` into ``artifacts``; best effort, as the stack may be half down."""
+        artifacts.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(Exception):
+            (artifacts / "compose.log").write_text(self.compose("logs", "--no-color", "--timestamps"))
 
     def down(self) -> None:
         with contextlib.suppress(Exception):
@@ -325,15 +336,14 @@ def stuck_at_start(stack: Stack, artifacts: Path | None) -> str:
 
     The whole compose log goes to ``artifacts`` too; the tail is in the error so that a CI log shows it.
     """
-    states = stack.inspect(*(c for s in ROLES + ("tensorboard",) for c in stack.containers(s)))
+    states = stack.states()
     lines = [
         f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
         f"health {state['health']})"
         for state in sorted(states.values(), key=lambda state: state["name"])
     ]
     if artifacts:
-        artifacts.mkdir(parents=True, exist_ok=True)
-        (artifacts / "compose.log").write_text(stack.compose("logs", "--no-color", "--timestamps", timeout=120))
+        stack.save_log(artifacts)
     for head in stack.containers("ray-head"):
         # The cluster's own view: which nodes it counts alive, and any actor still waiting for a place.
         status = run(["docker", "exec", head, "ray", "status"], timeout=60, check=False)
@@ -645,10 +655,12 @@ def main(argv: list[str] | None = None) -> int:
         deadline = time.time() + args.start_timeout
         while not metrics(stack, run_name):
             if time.time() > deadline:
-                raise RuntimeError(
-                    f"the learner logged no iteration within {args.start_timeout:.0f} s of `up`\n"
-                    + stuck_at_start(stack, args.artifacts)
-                )
+                try:
+                    detail = stuck_at_start(stack, args.artifacts)
+                except Exception as error:  # the stack's own failure is the error to raise, not the report's
+                    detail = f"(its state could not be read: {type(error).__name__}: {error})"
+                waited = f"{args.start_timeout:.0f} s"
+                raise RuntimeError(f"the learner logged no iteration within {waited} of `up`\n{detail}")
             time.sleep(2.0)
         started = time.time()
         report["up_to_first_iteration_s"] = started - up_at
@@ -731,8 +743,7 @@ def main(argv: list[str] | None = None) -> int:
         learner_ids = stack.containers("learner")
         learner_log = run(["docker", "logs", "--timestamps", learner_ids[0]], check=False) if learner_ids else ""
         records = metrics(stack, run_name)
-        states = stack.inspect(*(c for s in ("teacher", "learner", "ray-head", "ray-worker", "tensorboard")
-                                 for c in stack.containers(s)))  # fmt: skip
+        states = stack.states()
 
         results = count_results(database, delivered)
         replayed = replay_matches(database, live)
@@ -747,8 +758,7 @@ def main(argv: list[str] | None = None) -> int:
             (args.artifacts / "learner.log").write_text(learner_log)
             if delivery_log.exists():
                 shutil.copy(delivery_log, args.artifacts / "delivered.jsonl")
-            with contextlib.suppress(Exception):
-                (args.artifacts / "compose.log").write_text(stack.compose("logs", "--no-color", "--timestamps"))
+            stack.save_log(args.artifacts)
     finally:
         observer.stop.set()
         stack.down()
