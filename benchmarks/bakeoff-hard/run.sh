@@ -39,7 +39,7 @@ if [ "${1:-}" = diagnostics ]; then
     # $DIAGNOSTICS/<teacher>/ (summary.md and the plot).
     for teacher in "${TEACHERS[@]}"; do
         finished=()
-        for evaluation in "$OUT"/runs/"$teacher"-seed*/evaluation.json; do
+        for evaluation in "$OUT"/runs/"$teacher"-seed*/evaluation.json "$OUT"/runs/"$teacher"-seed*/evaluation.json.xz; do
             [ -f "$evaluation" ] && finished+=("$(dirname "$evaluation")")
         done
         [ ${#finished[@]} -gt 0 ] || continue

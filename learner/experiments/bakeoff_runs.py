@@ -31,7 +31,15 @@ from learner.arguments import UsageError
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TrainConfig
-from learner.experiments.run_archive import EVALUATION_FILE, TRAIN_LOG, metrics_records, restore_run
+from learner.experiments.run_archive import (
+    EVALUATION_FILE,
+    TRAIN_LOG,
+    compressed,
+    exists,
+    metrics_records,
+    read_json,
+    restore_run,
+)
 from learner.json_file import write_json
 
 RUNS_DIR = "runs"
@@ -135,7 +143,7 @@ def archives_runs(out: Path) -> bool:
     if not (Path(out) / SETTINGS_FILE).exists():
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(
-            "Finished runs here are archived: for git evaluation.json, metrics.jsonl.xz and the evaluated "
+            "Finished runs here are archived: for git evaluation.json.xz, metrics.jsonl.xz and the evaluated "
             "checkpoint alone; the teacher database and logs xz-compressed, on disk only (git-ignored).\n",
             encoding="utf-8",
         )
@@ -303,7 +311,8 @@ def train_runs(
             resume = done[run.name] > 0
             if resume:
                 restore_run(run.directory)
-                (run.directory / EVALUATION_FILE).unlink(missing_ok=True)
+                for stale in (run.directory / EVALUATION_FILE, compressed(run.directory / EVALUATION_FILE)):
+                    stale.unlink(missing_ok=True)
             else:
                 _clear_unfinished_start(run)
             progress.write(
@@ -326,8 +335,8 @@ def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_
     checkpoint = latest_checkpoint(run.directory)
     assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
     cache = run.directory / EVALUATION_FILE
-    if cache.exists():
-        cached = json.loads(cache.read_text(encoding="utf-8"))
+    if exists(cache):  # raw, or compressed once the run was archived
+        cached = read_json(cache)
         if (
             cached["checkpoint"] == checkpoint.name
             and cached["episodes"] == episodes
@@ -338,4 +347,5 @@ def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_
     task = task_space_for(env_id).hardest()
     result = evaluate_checkpoint(load_checkpoint(checkpoint), task, episodes, seed, processes)
     write_json(cache, {"checkpoint": checkpoint.name, **result.to_dict()})
+    compressed(cache).unlink(missing_ok=True)  # an archived run's earlier evaluation, now superseded
     return result

@@ -45,7 +45,7 @@ from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.core.config import TrainConfig
 from learner.experiments.bakeoff_runs import RUNS_DIR
-from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, unpacked
+from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, read_json, unpacked
 from learner.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.store import Store
@@ -139,8 +139,8 @@ def load_run(run_dir: Path) -> RunData:
     changed += [f"no {name}" for name in defaults if name not in spec["params"]]
     teacher = " ".join([spec["teacher"], *changed])
     placements, final_success = np.empty((0, 3)), np.empty(0, dtype=bool)
-    if (run_dir / EVALUATION_FILE).exists():
-        evaluation = json.loads((run_dir / EVALUATION_FILE).read_text())
+    if exists(run_dir / EVALUATION_FILE):
+        evaluation = read_json(run_dir / EVALUATION_FILE)
         final_success = np.array(evaluation["per_episode"]["success"], dtype=bool)
         seeds = range(evaluation["seed"], evaluation["seed"] + len(final_success))
         placements = np.array([np_random(seed)[0].random(3) for seed in seeds])

@@ -11,8 +11,8 @@ must have played the same episode seeds, so each row is read on the same placeme
     .venv/bin/python -m learner.experiments.placement_bands /tmp/currot-seed*.json /tmp/scripted.json \\
         --plot /tmp/bands.png
 
-A bake-off's own ``runs/<teacher>-seed<k>/evaluation.json`` holds no ``teacher`` key: its directory
-names the teacher.
+A bake-off's own ``runs/<teacher>-seed<k>/evaluation.json.xz`` (read as it is: xz-compressed files are
+read too) holds no ``teacher`` key: its directory names the teacher.
 
 Prints the markdown table; ``--json`` also writes each row's band counts.
 """
@@ -29,6 +29,7 @@ from learner.checkpoint_evaluation import pooled_episodes
 from learner.episode_diagnostics import band_table, plot_bands
 from learner.experiments.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
 from learner.experiments.bakeoff_runs import Run
+from learner.experiments.run_archive import read_json
 
 Rows = dict[str, list[list[tuple[EpisodeDiagnostics, bool]]]]
 """Per row label, each file's diagnosed episodes."""
@@ -49,21 +50,21 @@ def teacher_of(data: dict[str, Any], source: Path) -> str:
     if run is None or run.teacher not in TEACHER_LABELS:
         raise SystemExit(
             f"{source}: names no teacher; give an evaluate --json file of a training run, or a bake-off's "
-            "runs/<teacher>-seed<k>/evaluation.json"
+            "runs/<teacher>-seed<k>/evaluation.json.xz"
         )
     return run.teacher
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files")
+    parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files (or their xz-compressed .json.xz)")
     parser.add_argument("--plot", type=Path, help="also draw the bars here (PNG)")
     parser.add_argument("--json", type=Path, help="also write each row's band counts here")
     args = parser.parse_args()
     rows: Rows = {}
     seeds: set[tuple[int, int]] = set()
     for path in args.files:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = read_json(path)
         if data.get("controller") == "scripted":
             add(rows, SCRIPTED_LABEL, data, path, seeds)
             continue

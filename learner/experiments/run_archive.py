@@ -6,7 +6,7 @@ The write-up reads three of them: the metrics (learning curves), the final evalu
 checkpoint (so a reader can evaluate it again). Once a bake-off run or a tune trial is trained (and
 evaluated), ``archive_run`` leaves the run in this form:
 
-- for git (``write_up_files``): ``evaluation.json`` (a bake-off's runs), ``metrics.jsonl.xz`` with
+- for git (``write_up_files``): ``evaluation.json.xz`` (a bake-off's runs), ``metrics.jsonl.xz`` with
   the fields the write-ups read alone (``WRITE_UP_METRICS``, ``thin_metrics``) and ``checkpoints/``
   with the final checkpoint alone, evaluation-only (``save_evaluation_only``: no optimiser state, a
   third of the size; evaluate and render read it), the earlier ones deleted;
@@ -50,7 +50,8 @@ from learner.core.metrics import METRICS_FILE
 SUFFIX = ".xz"
 TRAIN_LOG = "train.log"
 EVALUATION_FILE = "evaluation.json"
-"""A bake-off run's final evaluation (``bakeoff_runs``), kept as it is."""
+"""A bake-off run's final evaluation (``bakeoff_runs``), kept for git xz-compressed like the metrics (the
+sizes: docs/results/bakeoff-hard.md)."""
 RESUME_CHECKPOINT = "resume.pt"
 """The final checkpoint in full, optimiser state included, for resuming: on disk only, while git keeps its
 evaluation-only copy in ``checkpoints/``."""
@@ -86,9 +87,9 @@ def _raw_files() -> tuple[str, ...]:
 
 def write_up_files() -> tuple[str, ...]:
     """The paths, relative to the run directory, that an archived run keeps for the write-up and git:
-    the final evaluation, the compressed metrics and the checkpoints directory (holding the final one,
+    the final evaluation and the metrics, compressed, and the checkpoints directory (holding the final one,
     evaluation-only)."""
-    return EVALUATION_FILE, METRICS_FILE + SUFFIX, CHECKPOINT_DIR
+    return EVALUATION_FILE + SUFFIX, METRICS_FILE + SUFFIX, CHECKPOINT_DIR
 
 
 def resume_files() -> tuple[str, ...]:
@@ -117,6 +118,18 @@ def read_text(path: Path) -> str | None:
     if packed.exists():
         return lzma.decompress(packed.read_bytes()).decode("utf-8", errors="replace")
     return None
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file, named by its raw name (read raw, else compressed, as ``read_text``) or by its compressed
+    one (``evaluation.json.xz``); ``FileNotFoundError`` when neither form is there."""
+    path = Path(path)
+    if path.name.endswith(SUFFIX) and path.exists():
+        return json.loads(_decompressed(path))
+    text = read_text(path)
+    if text is None:
+        raise FileNotFoundError(f"{path} is not there, raw or compressed")
+    return json.loads(text)
 
 
 def metrics_records(run_dir: Path) -> list[dict[str, Any]]:
@@ -246,8 +259,9 @@ def thin_metrics(log: Path) -> None:
 
 
 def archive_run(run_dir: Path) -> None:
-    """Compress a finished, evaluated run's raw files, its metrics log split by ``thin_metrics``, and keep
-    only its latest (evaluated) checkpoint, evaluation-only, with its full form moved to ``RESUME_CHECKPOINT``.
+    """Compress a finished, evaluated run's raw files and its evaluation, its metrics log split by
+    ``thin_metrics``, and keep only its latest (evaluated) checkpoint, evaluation-only, with its full form
+    moved to ``RESUME_CHECKPOINT``.
 
     Call it only when no process has the run open. A run already archived is left untouched (one
     archived before the metrics were split too: ``thin_metrics`` splits it when called on its own).
@@ -255,7 +269,7 @@ def archive_run(run_dir: Path) -> None:
     run_dir = Path(run_dir)
     database, *others = _raw_files()
     _close_database(run_dir / database)
-    for name in (database, *others):
+    for name in (database, *others, EVALUATION_FILE):
         if name == METRICS_FILE and (run_dir / name).exists():
             thin_metrics(run_dir / name)
         elif (run_dir / name).exists():
@@ -273,9 +287,9 @@ def archive_run(run_dir: Path) -> None:
 
 
 def restore_run(run_dir: Path) -> None:
-    """Put back an archived run's full final checkpoint and decompress its raw files, so training can
-    resume it from that checkpoint. A run archived without its full checkpoint (the committed ones, in a
-    clone) keeps the evaluation-only one, which training refuses to resume from. The metrics come back in
+    """Put back an archived run's full final checkpoint and decompress its raw files and evaluation, so
+    training can resume it from that checkpoint. A run archived without its full checkpoint (the committed
+    ones, in a clone) keeps the evaluation-only one, which training refuses to resume from. The metrics come back in
     full (``full_log``) where the run has them, so a resumed run appends to its complete log; a run archived
     before its metrics were split gets its one ``metrics.jsonl.xz`` back."""
     full = Path(run_dir) / RESUME_CHECKPOINT
@@ -287,7 +301,7 @@ def restore_run(run_dir: Path) -> None:
             _decompress(full_log(log), log)
         compressed(log).unlink(missing_ok=True)  # the thin copy, once the raw log is whole
         full_log(log).unlink()
-    for name in _raw_files():
+    for name in (*_raw_files(), EVALUATION_FILE):
         path = Path(run_dir) / name
         if path.exists():
             compressed(path).unlink(missing_ok=True)

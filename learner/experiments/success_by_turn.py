@@ -10,13 +10,12 @@ from the gripper's axis to the block at touchdown, and where the file recorded i
 wrist at touchdown (signed as the yaw actions add up).
 
     .venv/bin/python -m learner.experiments.success_by_turn \\
-        benchmarks/bakeoff-hard/*/runs/currot-seed0/evaluation.json /tmp/scripted.json
+        benchmarks/bakeoff-hard/*/runs/currot-seed0/evaluation.json.xz /tmp/scripted.json
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 
 from common.kuka.diagnostics import EpisodeDiagnostics
 from learner.checkpoint_evaluation import pooled_episodes
+from learner.experiments.run_archive import EVALUATION_FILE, SUFFIX, read_json
 
 X_BANDS = ((-math.inf, 0.5), (0.5, 0.6), (0.6, 0.65), (0.65, math.inf))
 """Block x (metres) bands: below the IK target's x range, its near half, its far half, and beyond it."""
@@ -81,17 +81,19 @@ def table(columns: dict[str, list[tuple[EpisodeDiagnostics, bool]]]) -> list[str
 def label(path: Path, data: dict[str, object]) -> str:
     if data.get("controller") == "scripted":
         return "scripted controller"
-    return path.parent.name if path.name == "evaluation.json" else path.stem
+    return path.parent.name if path.name in (EVALUATION_FILE, EVALUATION_FILE + SUFFIX) else path.stem
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("files", nargs="+", type=Path, help="evaluate --json files, all of the same episode seeds")
+    parser.add_argument(
+        "files", nargs="+", type=Path, help="evaluate --json files (or .json.xz), all of the same episode seeds"
+    )
     args = parser.parse_args(argv)
     columns: dict[str, list[tuple[EpisodeDiagnostics, bool]]] = {}
     seeds: set[tuple[int, int]] = set()
     for path in args.files:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = read_json(path)
         try:
             diagnosed = pooled_episodes(data, path, seeds)
         except ValueError as error:

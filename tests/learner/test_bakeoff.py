@@ -40,6 +40,8 @@ from learner.experiments.run_archive import (
     RESUME_CHECKPOINT,
     TENSORBOARD_DIR,
     archive_run,
+    exists,
+    read_json,
     read_text,
     restore_run,
     resume_files,
@@ -89,7 +91,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # Finished and evaluated, the run is archived: raw files compressed, and resuming undoes that below.
     assert sorted(path.name for path in fixed.directory.iterdir()) == [
         "checkpoints",
-        "evaluation.json",
+        "evaluation.json.xz",
         "metrics.full.jsonl.xz",
         "metrics.jsonl.xz",
         "resume.pt",
@@ -99,7 +101,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         "train.log.xz",
     ]
     # For git what the report reads; the rest only on disk, for resuming.
-    assert sorted(write_up_files()) == ["checkpoints", "evaluation.json", "metrics.jsonl.xz"]
+    assert sorted(write_up_files()) == ["checkpoints", "evaluation.json.xz", "metrics.jsonl.xz"]
     assert sorted(resume_files()) == [
         "metrics.full.jsonl.xz",
         "resume.pt",
@@ -116,7 +118,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # Each run is evaluated as soon as it is trained, before the next one starts.
     assert printed.index("fixed-seed0: hardest task") < printed.index("random-seed0: training")
     first_random_checkpoint = min(path.stat().st_mtime_ns for path in (random.directory / "checkpoints").iterdir())
-    assert (fixed.directory / "evaluation.json").stat().st_mtime_ns < first_random_checkpoint
+    assert (fixed.directory / "evaluation.json.xz").stat().st_mtime_ns < first_random_checkpoint
     assert f"at step {BATCH:_}" in read_text(fixed.directory / "train.log")
     for run in (fixed, random):
         # Only the evaluated checkpoint stays (the resumed `fixed` wrote two), and the curve is read compressed.
@@ -140,7 +142,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     assert [entry["teacher"] for entry in results["teachers"]] == ["fixed", "random"]
     table = (out / "results.md").read_text()
     for entry, run in zip(results["teachers"], (fixed, random), strict=True):
-        evaluation = json.loads((run.directory / "evaluation.json").read_text())
+        evaluation = json.loads(lzma.decompress((run.directory / "evaluation.json.xz").read_bytes()))
         returns = mean_interval(evaluation["per_episode"]["return"])
         assert evaluation["checkpoint"] == latest_checkpoint(run.directory).name, "the final policy is evaluated"
         assert evaluation["episodes"] == 3 and evaluation["task"] == results["evaluation"]["task"]
@@ -158,7 +160,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # The scripted controller played the final evaluation's seeds, and each teacher's students sit beside it.
     scripted = json.loads((out / "scripted_evaluation.json").read_text())
     assert (scripted["controller"], scripted["seed"], scripted["episodes"]) == ("scripted", 0, 3)
-    placements = json.loads((fixed.directory / "evaluation.json").read_text())["per_episode"]["block_x"]
+    placements = read_json(fixed.directory / "evaluation.json")["per_episode"]["block_x"]
     assert scripted["per_episode"]["block_x"] == placements
     assert results["scripted"]["success_rate"] == scripted["success_rate"]
     assert results["scripted"]["success_by_placement"] == scripted["success_by_placement"]
@@ -205,7 +207,7 @@ def test_ctrl_c_during_a_final_evaluation_stops_the_bakeoff_cleanly(tmp_path):
     assert code == 130, stderr
     assert "kuka-curriculum bakeoff: stopped; the same command resumes where it stopped" in stderr
     assert "Traceback" not in stderr, stderr
-    assert not (run.directory / "evaluation.json").exists()
+    assert not exists(run.directory / "evaluation.json")
 
 
 def test_a_bakeoff_on_the_hard_family_trains_and_evaluates_there(tmp_path, ray_cluster, capsys):
@@ -215,7 +217,7 @@ def test_a_bakeoff_on_the_hard_family_trains_and_evaluates_there(tmp_path, ray_c
     (run,) = plan_runs(out, ["fixed"], seeds=1)
     assert load_checkpoint(latest_checkpoint(run.directory)).config.env == HARD_ENV_ID
     hardest = KUKA_HARD_TASK_SPACE.hardest()
-    assert json.loads((run.directory / "evaluation.json").read_text())["task"] == hardest
+    assert read_json(run.directory / "evaluation.json.xz")["task"] == hardest
     results = json.loads((out / "results.json").read_text())
     assert results["evaluation"]["env"] == HARD_ENV_ID and results["evaluation"]["task"] == hardest
     assert results["teachers"][0]["book_return"] is None, "the book measured its own task, not this one"
@@ -433,6 +435,8 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     metrics = "".join(json.dumps(record) + "\n" for record in records)
     (run.directory / "metrics.jsonl").write_text(metrics)
     (run.directory / "train.log").write_text("iteration 2 at step 200\n")
+    evaluation = {"checkpoint": final.name, "per_episode": {"success": [True, False, True]}}
+    (run.directory / "evaluation.json").write_text(json.dumps(evaluation))
     with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
         database.execute("PRAGMA journal_mode=WAL")
         database.execute("CREATE TABLE results (step INTEGER)")
@@ -446,12 +450,15 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     names = sorted(path.name for path in run.directory.iterdir())
     assert names == [
         "checkpoints",
+        "evaluation.json.xz",
         "metrics.full.jsonl.xz",
         "metrics.jsonl.xz",
         "resume.pt",
         "teacher.sqlite.xz",
         "train.log.xz",
     ]
+    # Read by either name: the raw one falls back to the compressed file, as a report reads it.
+    assert read_json(run.directory / "evaluation.json") == read_json(run.directory / "evaluation.json.xz") == evaluation
     assert set(names) - set(write_up_files()) <= set(resume_files()), "nothing else stays beside the write-up's"
     assert [path.name for path in (run.directory / "checkpoints").iterdir()] == [final.name]
     assert load_checkpoint(final).evaluation_only, "git keeps the final checkpoint without its optimiser state"
@@ -467,6 +474,7 @@ def test_archiving_a_run_keeps_what_the_report_reads_and_restoring_it_gives_back
     restore_run(run.directory)
     assert not load_checkpoint(final).evaluation_only and not (run.directory / RESUME_CHECKPOINT).exists()
     assert (run.directory / "metrics.jsonl").read_text() == metrics
+    assert json.loads((run.directory / "evaluation.json").read_text()) == evaluation
     assert not list(run.directory.glob("*.xz"))
     with contextlib.closing(sqlite3.connect(run.directory / "teacher.sqlite")) as database:
         assert database.execute("SELECT count(*) FROM results").fetchone() == (500,)

@@ -118,10 +118,10 @@ def test_an_archived_bakeoff_run_reads_as_its_raw_files_did(tmp_path: Path) -> N
     assert not (run_dir / DATABASE_FILE).exists() and (run_dir / f"{DATABASE_FILE}.xz").exists()
     archived = load_run(run_dir)
     assert archived.teacher == raw.teacher and archived.space.names == raw.space.names
-    for field in ("unit_tasks", "success", "length", "step", "evaluation_steps", "evaluation_success"):
+    for field in ("unit_tasks", "success", "length", "step", "evaluation_steps", "evaluation_success", "final_success"):
         assert np.array_equal(getattr(archived, field), getattr(raw, field)), field
     assert summary_markdown([archived]) == summary_markdown([raw])
     names = sorted(path.name for path in run_dir.iterdir())
-    assert names == ["evaluation.json", "metrics.full.jsonl.xz", "metrics.jsonl.xz", "teacher.sqlite.xz"], (
+    assert names == ["evaluation.json.xz", "metrics.full.jsonl.xz", "metrics.jsonl.xz", "teacher.sqlite.xz"], (
         "no decompressed copy left behind"
     )

@@ -5,6 +5,7 @@ other episode seeds refused."""
 from __future__ import annotations
 
 import json
+import lzma
 import sys
 
 import pytest
@@ -57,8 +58,10 @@ def test_files_pool_per_teacher_beside_the_scripted_controller(tmp_path, monkeyp
 def test_a_bake_off_run_evaluation_takes_its_teacher_from_its_directory(tmp_path, monkeypatch, capsys):
     run = tmp_path / "runs" / "self-paced-seed3"
     run.mkdir(parents=True)
-    (run / "evaluation.json").write_text(json.dumps(evaluation([(0.58, True), (0.68, False)])))
-    monkeypatch.setattr(sys, "argv", ["placement_bands", str(run / "evaluation.json")])
+    # As a committed bake-off run keeps it: compressed.
+    packed = lzma.compress(json.dumps(evaluation([(0.58, True), (0.68, False)])).encode())
+    (run / "evaluation.json.xz").write_bytes(packed)
+    monkeypatch.setattr(sys, "argv", ["placement_bands", str(run / "evaluation.json.xz")])
     main()
     assert "| Self-paced (SPDL) (1 policy) | 50% (2) |" in capsys.readouterr().out
 

@@ -5,6 +5,7 @@ files of other seeds refused."""
 from __future__ import annotations
 
 import json
+import lzma
 import math
 
 import pytest
@@ -38,9 +39,12 @@ def test_each_file_is_a_column_split_by_turn_and_x(tmp_path, capsys):
     run = tmp_path / "currot-seed0"
     run.mkdir()
     # Near the arm: a clockwise block missed, an anticlockwise one (yaw pi - 0.3 is clockwise too) lifted.
-    (run / "evaluation.json").write_text(
-        json.dumps(
-            evaluation([(0.47, -0.3, False), (0.47, math.pi - 0.3, False), (0.47, 0.3, True), (0.68, 0.3, True)])
+    # As a committed bake-off run keeps it: compressed.
+    (run / "evaluation.json.xz").write_bytes(
+        lzma.compress(
+            json.dumps(
+                evaluation([(0.47, -0.3, False), (0.47, math.pi - 0.3, False), (0.47, 0.3, True), (0.68, 0.3, True)])
+            ).encode()
         )
     )
     scripted = tmp_path / "scripted.json"
@@ -52,7 +56,7 @@ def test_each_file_is_a_column_split_by_turn_and_x(tmp_path, capsys):
             }
         )
     )
-    main([str(run / "evaluation.json"), str(scripted)])
+    main([str(run / "evaluation.json.xz"), str(scripted)])
     printed = capsys.readouterr().out
     assert "| block | currot-seed0 | scripted controller |" in printed
     assert "| clockwise, x < 0.5 | 0% (2), 2.0 cm, wrist -40° | 100% (2), 2.0 cm, wrist -40° |" in printed
@@ -64,4 +68,4 @@ def test_each_file_is_a_column_split_by_turn_and_x(tmp_path, capsys):
     other = tmp_path / "other.json"
     other.write_text(json.dumps(evaluation([(0.47, 0.3, True)], seed=0)))
     with pytest.raises(SystemExit, match="played other episodes"):
-        main([str(run / "evaluation.json"), str(other)])
+        main([str(run / "evaluation.json.xz"), str(other)])
