@@ -310,9 +310,8 @@ def train_runs(
                 continue
             resume = done[run.name] > 0
             if resume:
-                restore_run(run.directory)
-                for stale in (run.directory / EVALUATION_FILE, compressed(run.directory / EVALUATION_FILE)):
-                    stale.unlink(missing_ok=True)
+                restore_run(run.directory)  # which leaves the evaluation raw
+                (run.directory / EVALUATION_FILE).unlink(missing_ok=True)
             else:
                 _clear_unfinished_start(run)
             progress.write(

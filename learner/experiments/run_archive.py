@@ -289,9 +289,9 @@ def archive_run(run_dir: Path) -> None:
 def restore_run(run_dir: Path) -> None:
     """Put back an archived run's full final checkpoint and decompress its raw files and evaluation, so
     training can resume it from that checkpoint. A run archived without its full checkpoint (the committed
-    ones, in a clone) keeps the evaluation-only one, which training refuses to resume from. The metrics come back in
-    full (``full_log``) where the run has them, so a resumed run appends to its complete log; a run archived
-    before its metrics were split gets its one ``metrics.jsonl.xz`` back."""
+    ones, in a clone) keeps the evaluation-only one, which training refuses to resume from. The metrics come
+    back in full (``full_log``) where the run has them, so a resumed run appends to its complete log; a run
+    archived before its metrics were split gets its one ``metrics.jsonl.xz`` back."""
     full = Path(run_dir) / RESUME_CHECKPOINT
     if full.exists():
         os.replace(full, checkpoint_path(run_dir, load_checkpoint(full).counters.steps))
