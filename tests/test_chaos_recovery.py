@@ -1,0 +1,71 @@
+"""When ``bench/chaos.py`` counts a learner as back after a fault, on containers' states as Docker reports
+them and the run's real metrics file; the Docker run itself is tests/test_chaos_stack.py."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import chaos  # noqa: E402  (bench/ is scripts, not a package)
+
+CONTAINER = "learner-1"
+
+
+class InspectedStack(chaos.Stack):
+    """A stack whose ``docker inspect`` answer is given: the learner container's state alone."""
+
+    def __init__(self, scratch: Path, state: dict[str, Any]) -> None:
+        super().__init__(scratch, "kcchaos", {}, volume_mb=16, run_name="run")
+        self.state = state
+
+    def inspect(self, *containers: str) -> dict[str, dict[str, Any]]:
+        return {CONTAINER: self.state} if CONTAINER in containers else {}
+
+
+def learner_state(status: str, exit_code: int, started_at: float) -> dict[str, Any]:
+    return {"status": status, "running": status == "running", "exit_code": exit_code, "started_at": started_at}
+
+
+def log_record(stack: chaos.Stack, at: float) -> None:
+    (stack.runs / stack.run_name).mkdir(parents=True, exist_ok=True)
+    with (stack.runs / stack.run_name / "metrics.jsonl").open("a") as metrics:
+        metrics.write(json.dumps({"step": 1000, "time": at}) + "\n")
+
+
+@pytest.fixture
+def fault() -> chaos.Fault:
+    return chaos.Fault(at_s=180.0, role="learner", kind="restart", container=CONTAINER, started=time.time() - 20)
+
+
+def test_a_learner_that_restarted_and_logged_an_iteration_is_back(tmp_path: Path, fault: chaos.Fault) -> None:
+    stack = InspectedStack(tmp_path, learner_state("running", 0, fault.started + 5))
+    assert not chaos.role_is_back(stack, fault)
+    log_record(stack, fault.started + 10)
+    assert chaos.role_is_back(stack, fault)
+
+
+def test_a_learner_stopped_in_its_last_iteration_is_back_when_its_restart_finds_nothing_left(
+    tmp_path: Path, fault: chaos.Fault
+) -> None:
+    """Started again after the fault, it exited 0 with no new record: its budget was spent (CI, 2026-12-03)."""
+    log_record(InspectedStack(tmp_path, {}), fault.started - 1)
+    assert chaos.role_is_back(InspectedStack(tmp_path, learner_state("exited", 0, fault.started + 5)), fault)
+
+
+@pytest.mark.parametrize(
+    ("status", "exit_code", "started_after_fault_s"),
+    [("exited", 143, 5.0), ("exited", 0, -30.0), ("restarting", 0, 5.0), ("running", 0, -30.0)],
+    ids=["failed-after-restart", "exited-before-the-fault", "restarting", "never-restarted"],
+)
+def test_a_learner_that_failed_or_never_restarted_is_not_back(
+    tmp_path: Path, fault: chaos.Fault, status: str, exit_code: int, started_after_fault_s: float
+) -> None:
+    stack = InspectedStack(tmp_path, learner_state(status, exit_code, fault.started + started_after_fault_s))
+    log_record(stack, time.time())  # even with an iteration logged since the fault
+    assert not chaos.role_is_back(stack, fault)
