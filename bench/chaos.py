@@ -292,7 +292,7 @@ def role_is_back(stack: Stack, fault: Fault) -> bool:
     state = stack.inspect(fault.container).get(fault.container)
     if state is None or state["started_at"] < fault.started - 1.0:
         return False
-    if fault.role == "learner" and state["status"] == "exited" and state["exit_code"] == 0:
+    if fault.role == "learner" and exited_cleanly(state):
         # Stopped in its last iteration, it finished the budget there; started again, it found nothing left
         # to train and exited 0 without a new record (CI, 2026-12-03, on a machine that trains faster).
         return True
@@ -360,9 +360,14 @@ def stuck_at_start(stack: Stack, artifacts: Path | None) -> str:
     return "\n".join(lines)
 
 
+def exited_cleanly(state: dict[str, Any]) -> bool:
+    """A container that ended with exit code 0: for the learner, a run that reached its budget."""
+    return bool(state["status"] == "exited" and state["exit_code"] == 0)
+
+
 def learner_finished(stack: Stack) -> bool:
     states = stack.inspect(*stack.containers("learner"))
-    return any(state["status"] == "exited" and state["exit_code"] == 0 for state in states.values())
+    return any(exited_cleanly(state) for state in states.values())
 
 
 def inject(stack: Stack, fault: Fault, rng: random.Random) -> None:
@@ -807,7 +812,7 @@ def evaluate(
     reached = (
         final_step >= args.steps
         and bool(learners)
-        and all(s["status"] == "exited" and s["exit_code"] == 0 for s in learners)
+        and all(exited_cleanly(s) for s in learners)
         and last_line.startswith("final checkpoint: ")
     )
     per = results["per_curriculum"]

@@ -54,8 +54,9 @@ def test_a_learner_stopped_in_its_last_iteration_is_back_when_its_restart_finds_
     tmp_path: Path, fault: chaos.Fault
 ) -> None:
     """Started again after the fault, it exited 0 with no new record: its budget was spent (CI, 2026-12-03)."""
-    log_record(InspectedStack(tmp_path, {}), fault.started - 1)
-    assert chaos.role_is_back(InspectedStack(tmp_path, learner_state("exited", 0, fault.started + 5)), fault)
+    stack = InspectedStack(tmp_path, learner_state("exited", 0, fault.started + 5))
+    log_record(stack, fault.started - 1)
+    assert chaos.role_is_back(stack, fault)
 
 
 @pytest.mark.parametrize(
