@@ -16,7 +16,8 @@
 #   mkdir -p runs/hard-screen-v1 && ENV_ID=KukaGraspHard-v1 setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v1/teachers.log 2>&1 &
 #
 # Variables: ENV_ID (KukaGraspHard-v0, the default, or KukaGraspHard-v1), PYTHON (default .venv/bin/python),
-# OUT (default runs/hard-screen-v4 or runs/hard-screen-v1).
+# OUT (default runs/hard-screen-v4 or runs/hard-screen-v1), SCREEN_EPISODES (the final evaluation's episodes,
+# default 100; issue 59's lines in screen-hard-v1.txt take 500).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
