@@ -95,10 +95,12 @@ class Curriculum:
         self.outstanding: dict[int, Task] = {}
         """Tasks awaiting a result, by index."""
         self.tasks_expired = 0
-        self._awaiting: deque[tuple[int, float]] = deque()
-        """(index, issued_at) of the tasks that may still be outstanding, oldest first."""
-        self._writing: set[int] = set()
-        """Tasks whose result is being stored: a second result for one is a duplicate."""
+        self._awaiting: deque[tuple[int, float, int]] = deque()
+        """(index, issued_at, ordinal) of the tasks that may still be outstanding, oldest first; the
+        ordinal counts stored tasks, so the task window ignores indices drawn for a failed write."""
+        self._writing: dict[int, asyncio.Future[None]] = {}
+        """Tasks whose result is being stored, each with a future that settles once that write has
+        committed or failed: a second result for one waits for it (see ``report``)."""
         self._task_ttl_s = settings.task_ttl_s
         self._task_window = settings.task_window
         self.recent_results: deque[RecentResult] = deque(maxlen=settings.recent_results)
@@ -144,7 +146,7 @@ class Curriculum:
 
         def stored() -> None:
             self.outstanding.update(zip(range(first, first + count), tasks, strict=True))
-            self._awaiting.extend((index, issued_at) for index in range(first, first + count))
+            self._awaiting.extend((first + i, issued_at, self.tasks_issued + i) for i in range(count))
             self.tasks_issued += count
             self.issued_index_end = max(self.issued_index_end, first + count)
             self._metrics.tasks_issued.inc(count)
@@ -161,33 +163,26 @@ class Curriculum:
 
         A result for a task that already has one (or appears twice here) is a duplicate, and one for
         a task that expired is late; both are ignored and counted, which makes retries safe. Results
-        are claimed before the write so a concurrent request cannot apply the same task twice.
+        are claimed before the write so a concurrent request cannot apply the same task twice. A
+        result whose task another request is still storing waits for that write: acknowledged as a
+        duplicate once it has committed, claimed here if it failed. (Acknowledging it at once would lose
+        it when a client's retry is told "duplicate" and the write it duplicated then meets a full disk.)
         """
+        indices = self._known_indices(items)
+        while in_flight := {self._writing[index] for index in indices if index in self._writing}:
+            await asyncio.wait(in_flight)  # a cancelled request leaves the write alone
         received_at = time.time()
         self._expire(received_at)
-        errors: list[dict[str, Any]] = []
         claimed: dict[int, ResultItem] = {}
         settled: list[int] = []
         duplicates = 0
-        for position, item in enumerate(items):
-            index = self.task_index(item.task_id)
-            if index is None:
-                errors.append(
-                    {
-                        "loc": ["body", "results", position, "task_id"],
-                        "msg": f"unknown task id {item.task_id!r}: curriculum {self.name!r} never issued it",
-                        "type": "unknown_task",
-                        "input": item.task_id,
-                    }
-                )
-            elif index in claimed or index in self._writing:
+        for index, item in zip(indices, items, strict=True):
+            if index in claimed:
                 duplicates += 1
             elif index in self.outstanding:
                 claimed[index] = item
             else:
                 settled.append(index)
-        if errors:
-            raise InvalidResults(errors)
         answered = self._store.answered_tasks(self.id, settled) if settled else set()
         late_duplicates = sum(index in answered for index in settled)
         duplicates += late_duplicates
@@ -198,14 +193,20 @@ class Curriculum:
         if not claimed:
             return ack
         tasks = {index: self.outstanding[index] for index in claimed}
-        self._writing.update(claimed)
+        write_settled = asyncio.get_running_loop().create_future()
+        self._writing.update(dict.fromkeys(claimed, write_settled))
         records = [
             NewResult(index, item.reward, item.success, item.length, received_at, item.score)
             for index, item in claimed.items()
         ]
 
+        def release() -> None:
+            for index in claimed:
+                del self._writing[index]
+            write_settled.set_result(None)
+
         def stored() -> None:
-            self._writing.difference_update(claimed)
+            release()
             for index, item in claimed.items():
                 self.outstanding.pop(index, None)
                 job = self._apply_result(
@@ -229,18 +230,34 @@ class Curriculum:
             self._result_rate.count(received_at, len(claimed))
             self._metrics.results_accepted.inc(len(claimed))
 
-        def not_stored() -> None:
-            self._writing.difference_update(claimed)
-
-        await self._store.add_results(self.id, records, on_commit=stored, on_abort=not_stored)
+        await self._store.add_results(self.id, records, on_commit=stored, on_abort=release)
         return ack
 
+    def _known_indices(self, items: list[ResultItem]) -> list[int]:
+        """The task index of each result; ``InvalidResults`` naming every id this curriculum never issued."""
+        indices = [self.task_index(item.task_id) for item in items]
+        errors = [
+            {
+                "loc": ["body", "results", position, "task_id"],
+                "msg": f"unknown task id {item.task_id!r}: curriculum {self.name!r} never issued it",
+                "type": "unknown_task",
+                "input": item.task_id,
+            }
+            for position, (item, index) in enumerate(zip(items, indices, strict=True))
+            if index is None
+        ]
+        if errors:
+            raise InvalidResults(errors)
+        return [index for index in indices if index is not None]
+
     def _expire(self, now: float) -> None:
-        """Forget tasks handed out more than ``task_ttl_s`` ago or ``task_window`` tasks ago."""
-        deadline, oldest_kept = now - self._task_ttl_s, self.issued_index_end - self._task_window
+        """Forget tasks handed out more than ``task_ttl_s`` ago or ``task_window`` tasks ago. The
+        window counts tasks handed out, not indices: every draw a full disk refused took indices too,
+        and counting those would expire the tasks whose results wait for the disk to have room."""
+        deadline, oldest_kept = now - self._task_ttl_s, self.tasks_issued - self._task_window
         expired = 0
-        while self._awaiting and (self._awaiting[0][0] < oldest_kept or self._awaiting[0][1] < deadline):
-            index, _ = self._awaiting.popleft()
+        while self._awaiting and (self._awaiting[0][2] < oldest_kept or self._awaiting[0][1] < deadline):
+            index, _, _ = self._awaiting.popleft()
             if self.outstanding.pop(index, None) is not None and index not in self._writing:
                 expired += 1
         if expired:
@@ -368,9 +385,9 @@ class Curriculum:
         self.results_received = self.teacher.results_seen
         self._last_result_index = replayed.last_result_index
         self._snapshot_at, self._history_stored = replayed.snapshot_at, replayed.history_stored
-        for awaited in replayed.awaited:
+        for awaited, ordinal in replayed.awaited:
             self.outstanding[awaited.index] = awaited.task
-            self._awaiting.append((awaited.index, awaited.issued_at))
+            self._awaiting.append((awaited.index, awaited.issued_at, ordinal))
         self._expire(time.time())
         for job in replayed.lost_fits:
             self._lost_fits.append(job)

@@ -7,6 +7,7 @@ through SQLite's ``max_page_count``, and exceptions that are not SQLite's from t
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import sqlite3
 import time
@@ -19,8 +20,10 @@ import httpx
 import pytest
 from in_process_service import ANSWER_WITHIN_S, InProcessService
 
+from common.client.schemas import ResultAck, ResultBatch
 from common.client.teacher_client import Backoff, TeacherClient
 from common.kuka.task_space import KUKA_TASK_SPACE
+from teacher_service.store import StoreError
 
 TOKEN = "store-failure-test-token"
 
@@ -118,6 +121,30 @@ def test_a_full_disk_answers_503_with_the_reason_and_writes_resume_once_there_is
     )
 
     assert _stored_results(service.store.path, "full") == {task["task_id"] for task in acknowledged}
+
+
+def test_a_result_sent_again_while_its_first_write_is_in_flight_waits_for_that_write(
+    service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]
+) -> None:
+    """A client that timed out sends the same result again while the service is still storing the
+    first copy, and that commit fails (the disk filled): the second copy must not be acknowledged as
+    a duplicate of a result that was never stored; it is stored itself, once."""
+    _create(http, "again", kuka_space)
+    tasks = _draw(http, "again", 1).json()["tasks"]
+    results = ResultBatch.model_validate(_results(tasks)).results
+    curriculum = service.app.state.registry.get("again")
+    database = service.store._db
+    full = sqlite3.OperationalError("database or disk is full")
+    service.on_loop(lambda: setattr(service.store, "_db", FailingConnection(database, "COMMIT", full)))
+
+    async def in_one_round() -> list[Any]:
+        return await asyncio.gather(curriculum.report(results), curriculum.report(results), return_exceptions=True)
+
+    first, second = asyncio.run_coroutine_threadsafe(in_one_round(), service.loop).result(ANSWER_WITHIN_S)
+    assert isinstance(first, StoreError), first
+    assert second == ResultAck(accepted=1, duplicates=0, expired=0), "acknowledged before anything was stored"
+    assert _stored_results(service.store.path, "again") == {tasks[0]["task_id"]}
+    assert http.post("/curricula/again/results", json=_results(tasks)).json()["duplicates"] == 1
 
 
 @pytest.mark.parametrize(
