@@ -465,11 +465,13 @@ def copy_database(stack: Stack, destination: Path) -> Path:
 def count_results(database: Path, delivered: list[dict[str, Any]]) -> dict[str, Any]:
     """Acknowledged task ids (the workers' log) against the stored results, by curriculum and task index."""
     acknowledged: dict[str, set[int]] = {}
+    answered_by: dict[str, dict[str, Any]] = {}
     acks = Counter[str]()
     for record in delivered:
         for task_id in record.get("acknowledged", []):
             name, _, index = task_id.rpartition(":")
             acknowledged.setdefault(name, set()).add(int(index))
+            answered_by[task_id] = record
         for key in ("accepted", "duplicates", "expired"):
             acks[key] += record.get(key, 0)
     with sqlite3.connect(database) as connection:
@@ -485,9 +487,16 @@ def count_results(database: Path, delivered: list[dict[str, Any]]) -> dict[str, 
             for name, cid in ids.items()
         }
     per_curriculum = {}
+    lost_answers = Counter[str]()
     for name in sorted(set(acknowledged) | set(counts)):
         stored = counts.get(name, Counter())
         acked = acknowledged.get(name, set())
+        for index in sorted(index for index in acked if stored[index] == 0):
+            answer = answered_by[f"{name}:{index}"]
+            lost_answers[
+                f"{answer.get('accepted')} accepted, {answer.get('duplicates')} duplicates, "
+                f"{answer.get('expired')} expired of {len(answer['acknowledged'])}"
+            ] += 1
         per_curriculum[name] = {
             "acknowledged": len(acked),
             "stored": sum(stored.values()),
@@ -500,6 +509,7 @@ def count_results(database: Path, delivered: list[dict[str, Any]]) -> dict[str, 
     return {
         "per_curriculum": per_curriculum,
         "ack_counts": dict(acks),
+        "lost_by_answer": dict(lost_answers.most_common()),
         "worker_5xx": dict(statuses),
         "worker_5xx_reasons": dict(reasons.most_common(8)),
     }
@@ -852,7 +862,8 @@ def evaluate(
         },
         "results stored exactly once": {
             "pass": lost == 0 and duplicated == 0 and acknowledged > 0,
-            "detail": f"{acknowledged:,} acknowledged, {lost} lost, {duplicated} duplicated",
+            "detail": f"{acknowledged:,} acknowledged, {lost} lost, {duplicated} duplicated"
+            + (f"; the answers that acknowledged the lost: {results['lost_by_answer']}" if lost else ""),
         },
         "disk full: 503 with the reason, degraded, recovers": {
             "pass": disk_ok,

@@ -59,8 +59,9 @@ class Replayed:
     """Results learned at the stored snapshot (0 without one)."""
     history_stored: int
     """History rows stored with that snapshot."""
-    awaited: list[AwaitedTask]
-    """Tasks inside the task window still awaiting a result, oldest first."""
+    awaited: list[tuple[AwaitedTask, int]]
+    """Tasks inside the task window still awaiting a result, oldest first, each with its ordinal
+    among the stored tasks (the window counts stored tasks, not indices)."""
     lost_fits: list[FitJob]
     """Fits that fell due and were never recorded: they run once the service has started."""
     rerun_fits: list[StoredFit]
@@ -133,16 +134,19 @@ def replay(
     install_recorded(teacher.results_seen)
     issued_end_now = later_tasks[-1].index + 1 if later_tasks else issued_index_end
     draw_to(issued_end_now)
-    oldest_kept = issued_end_now - task_window
+    tasks_issued_now = tasks_issued + len(later_tasks)
+    in_window = store.last_task_indices(curriculum_id, task_window)
+    ordinals = {index: tasks_issued_now - len(in_window) + rank for rank, index in enumerate(in_window)}
+    oldest_kept = in_window[0] if in_window else issued_end_now
     recent_then = [index for index in awaited_then if index >= oldest_kept]
     awaited = [
-        task
+        (task, ordinals[task.index])
         for task in store.awaited_tasks(curriculum_id, recent_then, max(issued_index_end, oldest_kept))
         if task.index not in answered
     ]
     errors = {fit.index: fit.error for fit in rerun_fits}
     return Replayed(
-        tasks_issued=tasks_issued + len(later_tasks),
+        tasks_issued=tasks_issued_now,
         issued_index_end=issued_end_now,
         results_replayed=total,
         last_result_index=last_result_index,

@@ -415,6 +415,14 @@ class Store:
         )
         return [StoredTask(*row) for row in rows]
 
+    def last_task_indices(self, curriculum_id: int, count: int) -> list[int]:
+        """The indices of the last ``count`` stored tasks, in index order."""
+        rows = self._db.execute(
+            "SELECT task_index FROM tasks WHERE curriculum_id = ? ORDER BY task_index DESC LIMIT ?",
+            (curriculum_id, count),
+        )
+        return [index for (index,) in rows][::-1]
+
     def result_count(self, curriculum_id: int, after_seq: int = 0) -> int:
         row = self._db.execute(
             "SELECT count(*) FROM results WHERE curriculum_id = ? AND seq > ?", (curriculum_id, after_seq)

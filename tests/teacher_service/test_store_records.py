@@ -74,6 +74,8 @@ def test_records_written_live_read_back_unchanged_after_a_restart(tmp_path: Path
     try:
         assert store.curricula() == [CURRICULUM]
         assert store.tasks_from(CURRICULUM.id, 1) == [StoredTask(index=1, results_seen=0), StoredTask(2, 1)]
+        assert store.last_task_indices(CURRICULUM.id, 2) == [1, 2]
+        assert store.last_task_indices(CURRICULUM.id, 9) == [0, 1, 2]
         assert list(store.results(CURRICULUM.id)) == [
             StoredResult(seq=1, task_index=1, task={"x": 0.75}, reward=0.5, success=True, length=40, received_at=4.0)
         ]

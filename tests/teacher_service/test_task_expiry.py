@@ -1,5 +1,6 @@
 """Tasks handed out and never reported expire, so a curriculum's memory of them stays bounded; a late
-result for an expired task is counted and ignored (a real uvicorn and SQLite file, and a SIGKILL)."""
+result for an expired task is counted and ignored (a real uvicorn and SQLite file, and a SIGKILL; a
+full disk through the in-process service)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any
 
 import httpx
 import pytest
+from in_process_service import InProcessService
 
 from teacher_service.process import ServiceProcess
 
@@ -95,3 +97,26 @@ def test_a_restart_keeps_only_the_tasks_still_awaited(db, kuka_space, snapshot_e
     ):
         assert _counters(api, "restart")["tasks_outstanding"] == WINDOW - 1
         assert _report(api, "restart", ids) == {"accepted": WINDOW - 1, "duplicates": 1, "expired": 2}
+
+
+def test_draws_a_full_disk_refused_do_not_count_in_the_window_live_or_after_a_restart(
+    db: Path, kuka_space: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Workers keep asking for tasks while the disk is full, and each refused draw takes indices. Only
+    tasks handed out count in the window: the task whose result waits for the disk stays awaited."""
+    monkeypatch.setenv("KC_TASK_WINDOW", str(WINDOW))
+    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+        _create(api, kuka_space, "full")
+        waiting = _draw(api, "full", 1)
+        service.fill_disk()
+        refused = [api.post("/curricula/full/tasks", json={"count": 1024}).status_code for _ in range(3)]
+        assert refused == [503] * 3, "the disk was not full"
+        service.free_disk()
+        later = _draw(api, "full", 1)
+        assert int(later[0].rpartition(":")[2]) > WINDOW, "the refused draws took no indices"
+        assert _counters(api, "full")["tasks_outstanding"] == 2
+    with InProcessService(db) as service, httpx.Client(base_url=f"{service.url}/api/v1", timeout=10.0) as api:
+        assert _counters(api, "full")["tasks_outstanding"] == 2
+        assert _report(api, "full", waiting + later) == {"accepted": 2, "duplicates": 0, "expired": 0}
+        _draw(api, "full", WINDOW + 2)
+        assert _counters(api, "full")["tasks_outstanding"] == WINDOW, "the window no longer bounds what is kept"
