@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -60,6 +61,19 @@ def test_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> None:
     assert not orphans, f"workers {orphans} outlived their killed parent"
 
 
+@pytest.fixture
+def python_ctrl_c() -> Iterator[None]:
+    """Python's own Ctrl-C handler, whatever this process inherited: started in the background by a
+    shell without job control (``make test &``), Python keeps SIGINT ignored and there is no
+    ``KeyboardInterrupt`` to hand on."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("python_ctrl_c")
 def test_a_ctrl_c_inside_the_pool_is_held_until_a_safe_point_and_raised_there() -> None:
     reached_the_safe_point = False
     with pytest.raises(KeyboardInterrupt), StoppablePool(2, mp_context=get_context("spawn")) as pool:
