@@ -32,6 +32,17 @@ positive_int = int_at_least(1)
 non_negative_int = int_at_least(0)
 
 
+def unit_fraction(text: str) -> float:
+    """An argparse type: a number between 0 and 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number between 0 and 1, got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1, got {value}")
+    return value
+
+
 def setting(text: str) -> tuple[str, Any]:
     """An argparse type: ``NAME=VALUE`` with VALUE in JSON (``fit_rate=100``, ``reward_range=[-5,10]``);
     a VALUE that is not JSON is taken as a string."""

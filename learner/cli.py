@@ -18,7 +18,14 @@ from typing import Any
 
 from pydantic import SecretStr
 
-from learner.arguments import UsageError, add_override_flags, non_negative_int, positive_int, run_command
+from learner.arguments import (
+    UsageError,
+    add_override_flags,
+    non_negative_int,
+    positive_int,
+    run_command,
+    unit_fraction,
+)
 from learner.config_file import read_config_file
 from learner.core.config import TEACHERS, TrainConfig
 from learner.session import (
@@ -60,6 +67,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {DEFAULTS.eval_episodes})"
     )
+    run.add_argument(
+        "--edge-placement-share",
+        type=unit_fraction,
+        help="a hard KUKA family's training placements: the share of far points drawn beyond the arm's x clamp "
+        f"only; evaluations keep the task's draw (default {DEFAULTS.edge_placement_share})",
+    )
     add_override_flags(run, "for this run")
     add_training_flags(run, defaults_given=False, level_families=True)
     where = parser.add_argument_group("where")
@@ -98,6 +111,7 @@ _RUN_SETTINGS = (
     "eval_every",
     "eval_episodes",
     "loop",
+    "edge_placement_share",
 )
 """``TrainConfig`` fields settable by the flag of the same name."""
 

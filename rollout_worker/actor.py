@@ -62,14 +62,20 @@ class WorkerSettings:
     """Where tasks come from and results go instead of the teacher service (None: the service at
     ``teacher_url``): a benchmark's stand-in, such as no curriculum at all or another library's
     curriculum, run with the same workers and learner."""
+    edge_placement_share: float = 0.0
+    """A hard KUKA family's training placements: the share of far points drawn beyond the arm's clamp
+    (``KukaGraspHardEnv``); evaluation episodes keep the task's own draw."""
 
 
-def make_env(env_id: str, max_steps: int) -> gym.Env[np.ndarray, Any]:
-    """A bare environment of a KUKA family, or a level family's (its level the reset seed)."""
+def make_env(env_id: str, max_steps: int, edge_placement_share: float = 0.0) -> gym.Env[np.ndarray, Any]:
+    """A bare environment of a KUKA family, or a level family's (its level the reset seed); a nonzero
+    ``edge_placement_share`` goes to a hard KUKA family's placement."""
     if is_level_env(env_id):
         from common.levels.env import make_level_env  # here: minigrid loads only for a level family
 
         return make_level_env(env_id, max_steps=max_steps)
+    if edge_placement_share:
+        return make_kuka_env(env_id, max_steps=max_steps, edge_placement_share=edge_placement_share)
     return make_kuka_env(env_id, max_steps=max_steps)
 
 
@@ -113,7 +119,10 @@ class RolloutWorker:
                 max_buffered_results=settings.results_buffer,
             )
             tasks = _TeacherTasks(self.client)
-        envs = [make_env(settings.env_id, settings.max_episode_steps) for _ in range(settings.num_envs)]
+        envs = [
+            make_env(settings.env_id, settings.max_episode_steps, settings.edge_placement_share)
+            for _ in range(settings.num_envs)
+        ]
         self.sampler = Sampler(envs, tasks, seed, settings.score_discount)
         self.evaluation_env: gym.Env[np.ndarray, Any] | None = None
         self.policy: InferencePolicy | None = None

@@ -31,7 +31,7 @@ import pybullet_data
 from gymnasium import spaces
 
 from common.client.task_space import Task, TaskSpace
-from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, KukaArm
+from common.kuka.arm import DEFAULT_START_POSE, END_EFFECTOR_LINK, GRIPPER_LINK, TARGET_X_RANGE, KukaArm
 from common.kuka.bullet import direct_client, gui_client, pybullet
 from common.kuka.env_ids import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.kuka.task_space import ALIGN_MARGIN_ANY, KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
@@ -394,15 +394,29 @@ class KukaGraspHardEnv(KukaGraspEnv):
 
     task_space = KUKA_HARD_TASK_SPACE
 
+    def __init__(self, *, edge_placement_share: float = 0.0, **kwargs: Any) -> None:
+        """``edge_placement_share``: the share of far points drawn beyond the arm's x clamp only, a
+        training-time emphasis on the placements students miss most (0: every far point as the task
+        says, the evaluations' draw). The other arguments are ``KukaGraspEnv``'s."""
+        if not 0.0 <= edge_placement_share <= 1.0:
+            raise ValueError(f"edge_placement_share must be between 0 and 1, got {edge_placement_share}")
+        self._edge_placement_share = edge_placement_share
+        super().__init__(**kwargs)
+
     def _placement(self) -> tuple[float, float, float]:
         """The book's placement moved a share ``obj_far`` of the way to a uniform far point; the far
-        point is drawn after the book's draws, so ``obj_far`` 0 places the block as the book does."""
+        point is drawn after the book's draws, so ``obj_far`` 0 places the block as the book does. With
+        an ``edge_placement_share`` the draws then decide whether this far point must lie beyond the
+        clamp; at 0 nothing more is drawn, so placements stay those of a given seed."""
         x, y, yaw = super()._placement()
         low = np.array([FAR_X_RANGE[0], FAR_Y_RANGE[0]])
         high = np.array([FAR_X_RANGE[1], FAR_Y_RANGE[1]])
         candidates = low + (high - low) * self.np_random.random((FAR_CANDIDATES, 2))
         distances = np.hypot(candidates[:, 0] - FAR_CENTRE[0], candidates[:, 1] - FAR_CENTRE[1])
-        far_enough = np.flatnonzero(distances >= FAR_MIN_DISTANCE)
+        eligible = distances >= FAR_MIN_DISTANCE
+        if self._edge_placement_share > 0.0 and self.np_random.random() < self._edge_placement_share:
+            eligible &= (candidates[:, 0] < TARGET_X_RANGE[0]) | (candidates[:, 0] > TARGET_X_RANGE[1])
+        far_enough = np.flatnonzero(eligible)
         far_x, far_y = candidates[far_enough[0] if far_enough.size else int(np.argmax(distances))]
         share = self._task["obj_far"]
         return x + share * (float(far_x) - x), y + share * (float(far_y) - y), yaw

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from common.kuka import ENV_ID, ENV_IDS
+from common.kuka import ENV_ID, ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
 from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS, MAX_LEVELS, is_level_env
 from common.policy.noise import LOG_STD_BOUNDS
 from learner.core.periodic_evaluation import (
@@ -188,6 +188,8 @@ class TrainConfig:
     """A KUKA family's evaluation seeds: placements spread as the final evaluation's, or consecutive from 10,000."""
     loop: Literal["async", "sync"] = "async"
     """async: workers sample the next batch, one update behind, while the learner updates; sync: on-policy, paused."""
+    edge_placement_share: float = 0.0
+    """Share of a hard KUKA family's far training placements drawn beyond the arm's x clamp (never evaluations')."""
     teacher_overrides: dict[str, Any] = field(default_factory=dict)
     """Teacher parameters on top of ``KUKA_TEACHER_PARAMS`` (the service validates them at registration)."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -213,6 +215,14 @@ class TrainConfig:
             f"stratified evaluation seeds take at most {MAX_STRATIFIED_EPISODES:,} eval_episodes",
         )
         _require(self.loop in LOOPS, f"loop must be one of {', '.join(LOOPS)}, got {self.loop!r}")
+        _require(
+            0.0 <= self.edge_placement_share <= 1.0,
+            f"edge_placement_share must be between 0 and 1, got {self.edge_placement_share}",
+        )
+        _require(
+            self.edge_placement_share == 0.0 or self.env in (HARD_ENV_ID, HARD_V1_ENV_ID),
+            f"edge_placement_share needs a hard KUKA family ({HARD_ENV_ID} or {HARD_V1_ENV_ID}), not {self.env}",
+        )
 
     @property
     def teacher_params(self) -> dict[str, Any]:

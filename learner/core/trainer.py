@@ -99,9 +99,9 @@ class Trainer:
         """Finish the current iteration, write a checkpoint and return (safe from a signal handler)."""
         self._stop_requested = True
 
-    def run(self, on_iteration: Callable[[IterationReport], None] | None = None) -> Path:
-        """Train until the step budget is spent or a stop is requested; return the final checkpoint."""
-        settings = WorkerSettings(
+    def worker_settings(self) -> WorkerSettings:
+        """What every rollout actor of this run is started with, from the run's config."""
+        return WorkerSettings(
             teacher_url=self.teacher_url,
             curriculum=self.curriculum,
             num_envs=self.config.envs_per_worker,
@@ -111,7 +111,12 @@ class Trainer:
             env_id=self.config.env,
             score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
             task_source=self.task_source,
+            edge_placement_share=self.config.edge_placement_share,
         )
+
+    def run(self, on_iteration: Callable[[IterationReport], None] | None = None) -> Path:
+        """Train until the step budget is spent or a stop is requested; return the final checkpoint."""
+        settings = self.worker_settings()
         # Resumed runs draw fresh environment seeds instead of replaying the first run's.
         pool_seed = int(np.random.SeedSequence([self.config.seed, self.counters.iteration]).generate_state(1)[0])
         metrics = MetricsLog(self.run_dir)

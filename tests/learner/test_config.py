@@ -49,6 +49,8 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
         (lambda: TrainConfig(env="KukaGrasp-v9"), "env must be one of KukaGrasp-v0, KukaGraspHard-v0"),
         (lambda: TrainConfig(workers=0), "workers"),
         (lambda: TrainConfig(total_steps=0), "total_steps"),
+        (lambda: TrainConfig(env="KukaGraspHard-v1", edge_placement_share=1.5), "edge_placement_share must be"),
+        (lambda: TrainConfig(edge_placement_share=0.5), "edge_placement_share needs a hard KUKA family"),
         (lambda: PPOConfig(gamma=1.5), "gamma"),
         (lambda: PPOConfig(minibatch_size=0), "minibatch_size"),
         (lambda: PPOConfig(hidden_sizes=()), "hidden_sizes"),

@@ -107,6 +107,20 @@ def test_a_guessable_teacher_token_is_refused_before_anything_starts(tmp_path, c
     assert not (tmp_path / "run").exists(), "the refusal came after the run started"
 
 
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--edge-placement-share", "2"], "--edge-placement-share: must be between 0 and 1, got 2.0"),
+        (["--edge-placement-share", "0.5"], "edge_placement_share needs a hard KUKA family"),
+    ],
+)
+def test_an_edge_placement_share_needs_a_hard_family_and_a_share(tmp_path, capsys, flags, message):
+    with contextlib.suppress(SystemExit):
+        assert main(["train", "--run-dir", str(tmp_path / "run"), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_unknown_environment_is_refused_by_name(capsys):
     with pytest.raises(SystemExit) as stopped:
         main(["train", "--env", "KukaGrasp-v9"])

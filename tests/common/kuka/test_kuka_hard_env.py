@@ -5,6 +5,7 @@ tighter hardest alignment margin."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import gymnasium
 import numpy as np
@@ -13,6 +14,7 @@ from gymnasium.utils.env_checker import check_env
 from test_kuka_env import random_actions, rollout
 
 from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
+from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.env import (
     FAR_CENTRE,
     FAR_MIN_DISTANCE,
@@ -129,6 +131,42 @@ def test_far_blocks_lie_far_from_the_gripper_and_within_reach(env):
     assert FAR_X_RANGE[0] <= placements_array[:, 0].min() and placements_array[:, 0].max() <= FAR_X_RANGE[1]
     assert FAR_Y_RANGE[0] <= placements_array[:, 1].min() and placements_array[:, 1].max() <= FAR_Y_RANGE[1]
     assert placements_array[:, 0].max() > 0.66 and placements_array[:, 1].max() > 0.18, "all over the far region"
+
+
+def beyond_the_clamp(x: float) -> bool:
+    return x < TARGET_X_RANGE[0] or x > TARGET_X_RANGE[1]
+
+
+def test_an_edge_placement_share_draws_that_share_of_far_points_beyond_the_clamp(env):
+    def hardest_placements(environment: KukaGraspEnv, seeds: range) -> Iterator[np.ndarray]:
+        for seed in seeds:
+            environment.reset(seed=seed, options={"task": HARDEST})
+            yield block_xy(environment)
+
+    seeds = range(60)
+    task_draw = list(hardest_placements(env, seeds))
+    inside = [xy for xy in task_draw if not beyond_the_clamp(xy[0])]
+    assert len(inside) >= 10, "the task's own draw puts many far blocks inside the clamp"
+    at_zero, always, half = (KukaGraspHardV1Env(edge_placement_share=share) for share in (0.0, 1.0, 0.5))
+    try:
+        assert np.array_equal(np.array(list(hardest_placements(at_zero, seeds))), np.array(task_draw)), (
+            "a share of 0 draws nothing more: each seed places the block as before"
+        )
+        edge_only = np.array(list(hardest_placements(always, seeds)))
+        assert all(beyond_the_clamp(x) for x in edge_only[:, 0])
+        distances = np.hypot(edge_only[:, 0] - FAR_CENTRE[0], edge_only[:, 1] - FAR_CENTRE[1])
+        assert distances.min() >= FAR_MIN_DISTANCE - 1e-6, "still far from the gripper"
+        half_inside = sum(not beyond_the_clamp(xy[0]) for xy in hardest_placements(half, seeds))
+        assert 0 < half_inside < len(inside), "half the far points as the task says, so fewer inside"
+    finally:
+        for environment in (at_zero, always, half):
+            environment.close()
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5])
+def test_an_edge_placement_share_outside_0_to_1_is_refused(share):
+    with pytest.raises(ValueError, match="edge_placement_share must be between 0 and 1"):
+        KukaGraspHardEnv(edge_placement_share=share)
 
 
 def test_obj_far_moves_the_block_continuously_from_the_books_placement(env):

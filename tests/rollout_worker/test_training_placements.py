@@ -1,0 +1,39 @@
+"""A hard KUKA run's ``edge_placement_share`` reaches the environments its workers train on, and only those:
+the workers' evaluation environments, like every final evaluation, keep the task's own placement draw."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from common.kuka import HARD_V1_ENV_ID
+from common.kuka.arm import TARGET_X_RANGE
+from common.kuka.env import KukaGraspEnv
+from learner.core.config import TrainConfig
+from learner.core.trainer import Trainer
+from rollout_worker.actor import make_env
+
+SEEDS = range(40)
+
+
+def block_x_at_the_hardest_task(env: KukaGraspEnv) -> list[float]:
+    xs = []
+    for seed in SEEDS:
+        env.reset(seed=seed)  # no task given: the family's hardest
+        xs.append(env.block_pose()[0])
+    env.close()
+    return xs
+
+
+def beyond_the_clamp(x: float) -> bool:
+    return x < TARGET_X_RANGE[0] or x > TARGET_X_RANGE[1]
+
+
+def test_a_runs_edge_placement_share_reaches_its_training_environments_only(tmp_path: Path) -> None:
+    config = TrainConfig(env=HARD_V1_ENV_ID, edge_placement_share=1.0, workers=1)
+    settings = Trainer(config, tmp_path, "http://127.0.0.1:9", "unused").worker_settings()
+    assert settings.edge_placement_share == 1.0
+    training = make_env(settings.env_id, settings.max_episode_steps, settings.edge_placement_share)
+    evaluation = make_env(settings.env_id, settings.max_episode_steps)  # as ``RolloutWorker.evaluate`` makes it
+    assert isinstance(training, KukaGraspEnv) and isinstance(evaluation, KukaGraspEnv)
+    assert all(beyond_the_clamp(x) for x in block_x_at_the_hardest_task(training))
+    assert sum(not beyond_the_clamp(x) for x in block_x_at_the_hardest_task(evaluation)) >= 5
