@@ -8,9 +8,9 @@
 # The list is read again before each run, so lines can be added while this runs; every line ever run
 # stays in it (the record of every configuration tried). A finished run is
 # skipped, an unfinished one resumes from its checkpoint, so running this again carries on.
-# Each finished run's metrics (xz-compressed since issue 44's runs; earlier runs also kept the teacher
-# database, now left in the run directory) and final evaluation are copied to screening/v4-NAME/ (v0)
-# or screening/hard-v1-NAME/ (v1) beside this file.
+# Each finished run's metrics (xz-compressed since issue 44's runs, cut to the fields the write-ups read
+# since 2026-12-04; earlier runs also kept the teacher database, now left in the run directory) and final
+# evaluation are copied to screening/v4-NAME/ (v0) or screening/hard-v1-NAME/ (v1) beside this file.
 #
 #   mkdir -p runs/hard-screen-v4 && setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v4/teachers.log 2>&1 &
 #   mkdir -p runs/hard-screen-v1 && ENV_ID=KukaGraspHard-v1 setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v1/teachers.log 2>&1 &
@@ -50,7 +50,9 @@ while line=$(next_configuration) && [ -n "$line" ]; do
     evaluate "$name" hardest
     kept="$HERE/screening/$PREFIX-$name"
     mkdir -p "$kept"
-    xz -9 --keep --stdout "$OUT/$name/metrics.jsonl" > "$kept/metrics.jsonl.xz"
+    # git keeps the metrics the write-ups read (WRITE_UP_METRICS); the full log stays beside it, git-ignored
+    cp "$OUT/$name/metrics.jsonl" "$kept/"
+    "$PYTHON" -c 'import sys; from pathlib import Path; from learner.experiments.run_archive import thin_metrics; thin_metrics(Path(sys.argv[1]))' "$kept/metrics.jsonl"
     cp "$OUT/$name/evaluation-hardest.json" "$kept/"
 done
 echo "$(date -u +%FT%TZ) every configuration in $LIST is done"
