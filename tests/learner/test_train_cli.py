@@ -82,9 +82,11 @@ def test_resuming_needs_the_run_directory(flag, capsys):
         (["--ppo", "entropy=0.01"], "unknown PPO hyperparameter(s) entropy; known: rollout_length"),
         (["--ppo", "update_epochs=many"], "PPO hyperparameter update_epochs cannot be 'many'"),
         (["--ppo", "entropy_coef"], "expected NAME=VALUE, got 'entropy_coef'"),
+        (["--edge-placement-share", "2"], "--edge-placement-share: must be between 0 and 1, got 2.0"),
+        (["--edge-placement-share", "0.5"], "edge_placement_share needs a hard KUKA family"),
     ],
 )
-def test_a_bad_hyperparameter_is_refused_by_name(tmp_path, capsys, flags, message):
+def test_a_bad_setting_is_refused_by_name(tmp_path, capsys, flags, message):
     with contextlib.suppress(SystemExit):
         assert main(["train", "--run-dir", str(tmp_path / "run"), *flags]) == 2
     assert message in capsys.readouterr().err
@@ -105,20 +107,6 @@ def test_a_guessable_teacher_token_is_refused_before_anything_starts(tmp_path, c
     assert error.startswith("kuka-curriculum train: error: KC_TEACHER_TOKEN ") and reason in error
     assert "secrets.token_urlsafe(32)" in error
     assert not (tmp_path / "run").exists(), "the refusal came after the run started"
-
-
-@pytest.mark.parametrize(
-    ("flags", "message"),
-    [
-        (["--edge-placement-share", "2"], "--edge-placement-share: must be between 0 and 1, got 2.0"),
-        (["--edge-placement-share", "0.5"], "edge_placement_share needs a hard KUKA family"),
-    ],
-)
-def test_an_edge_placement_share_needs_a_hard_family_and_a_share(tmp_path, capsys, flags, message):
-    with contextlib.suppress(SystemExit):
-        assert main(["train", "--run-dir", str(tmp_path / "run"), *flags]) == 2
-    assert message in capsys.readouterr().err
-    assert not (tmp_path / "run").exists()
 
 
 def test_an_unknown_environment_is_refused_by_name(capsys):
