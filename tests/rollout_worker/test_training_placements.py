@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from common.kuka import HARD_V1_ENV_ID
-from common.kuka.arm import TARGET_X_RANGE
+from common.kuka.diagnostics import beyond_clamp
 from common.kuka.env import KukaGraspEnv
 from learner.core.config import TrainConfig
 from learner.core.trainer import Trainer
@@ -24,10 +24,6 @@ def block_x_at_the_hardest_task(env: KukaGraspEnv) -> list[float]:
     return xs
 
 
-def beyond_the_clamp(x: float) -> bool:
-    return x < TARGET_X_RANGE[0] or x > TARGET_X_RANGE[1]
-
-
 def test_a_runs_edge_placement_share_reaches_its_training_environments_only(tmp_path: Path) -> None:
     config = TrainConfig(env=HARD_V1_ENV_ID, edge_placement_share=1.0, workers=1)
     settings = Trainer(config, tmp_path, "http://127.0.0.1:9", "unused").worker_settings()
@@ -35,5 +31,5 @@ def test_a_runs_edge_placement_share_reaches_its_training_environments_only(tmp_
     training = make_env(settings.env_id, settings.max_episode_steps, settings.edge_placement_share)
     evaluation = make_env(settings.env_id, settings.max_episode_steps)  # as ``RolloutWorker.evaluate`` makes it
     assert isinstance(training, KukaGraspEnv) and isinstance(evaluation, KukaGraspEnv)
-    assert all(beyond_the_clamp(x) for x in block_x_at_the_hardest_task(training))
-    assert sum(not beyond_the_clamp(x) for x in block_x_at_the_hardest_task(evaluation)) >= 5
+    assert all(beyond_clamp(x) > 0 for x in block_x_at_the_hardest_task(training))
+    assert sum(beyond_clamp(x) <= 0 for x in block_x_at_the_hardest_task(evaluation)) >= 5

@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 from test_kuka_env import random_actions, rollout
 
 from common.kuka import ENV_ID, HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.arm import TARGET_X_RANGE
+from common.kuka.diagnostics import beyond_clamp
 from common.kuka.env import (
     FAR_CENTRE,
     FAR_MIN_DISTANCE,
@@ -133,10 +133,6 @@ def test_far_blocks_lie_far_from_the_gripper_and_within_reach(env):
     assert placements_array[:, 0].max() > 0.66 and placements_array[:, 1].max() > 0.18, "all over the far region"
 
 
-def beyond_the_clamp(x: float) -> bool:
-    return x < TARGET_X_RANGE[0] or x > TARGET_X_RANGE[1]
-
-
 def test_an_edge_placement_share_draws_that_share_of_far_points_beyond_the_clamp(env):
     def hardest_placements(environment: KukaGraspEnv, seeds: range) -> Iterator[np.ndarray]:
         for seed in seeds:
@@ -145,7 +141,7 @@ def test_an_edge_placement_share_draws_that_share_of_far_points_beyond_the_clamp
 
     seeds = range(60)
     task_draw = list(hardest_placements(env, seeds))
-    inside = [xy for xy in task_draw if not beyond_the_clamp(xy[0])]
+    inside = [xy for xy in task_draw if beyond_clamp(xy[0]) <= 0]
     assert len(inside) >= 10, "the task's own draw puts many far blocks inside the clamp"
     at_zero, always, half = (KukaGraspHardV1Env(edge_placement_share=share) for share in (0.0, 1.0, 0.5))
     try:
@@ -153,10 +149,10 @@ def test_an_edge_placement_share_draws_that_share_of_far_points_beyond_the_clamp
             "a share of 0 draws nothing more: each seed places the block as before"
         )
         edge_only = np.array(list(hardest_placements(always, seeds)))
-        assert all(beyond_the_clamp(x) for x in edge_only[:, 0])
+        assert all(beyond_clamp(x) > 0 for x in edge_only[:, 0])
         distances = np.hypot(edge_only[:, 0] - FAR_CENTRE[0], edge_only[:, 1] - FAR_CENTRE[1])
         assert distances.min() >= FAR_MIN_DISTANCE - 1e-6, "still far from the gripper"
-        half_inside = sum(not beyond_the_clamp(xy[0]) for xy in hardest_placements(half, seeds))
+        half_inside = sum(beyond_clamp(xy[0]) <= 0 for xy in hardest_placements(half, seeds))
         assert 0 < half_inside < len(inside), "half the far points as the task says, so fewer inside"
     finally:
         for environment in (at_zero, always, half):
