@@ -53,7 +53,7 @@ def play_chunk(env_id: str, policy: str, checkpoint: str, seeds: list[int]) -> l
     if policy == "checkpoint":
         from common.policy.actor_critic import InferencePolicy
         from learner.core.checkpoint import load_checkpoint
-        from learner.core.kuka_policy import policy_snapshot
+        from learner.core.policy import policy_snapshot
 
         network = InferencePolicy(policy_snapshot(load_checkpoint(Path(checkpoint))))
     episodes = []

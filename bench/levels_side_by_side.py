@@ -39,7 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.levels import HELD_OUT_FIRST_SEED, LEVEL_ENV_IDS  # noqa: E402
+from common.families.base import HELD_OUT_FIRST_SEED  # noqa: E402
+from common.levels import LEVEL_ENV_IDS  # noqa: E402
 from learner.core.config import TrainConfig  # noqa: E402
 
 OURS = {
@@ -153,7 +154,7 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
 def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
     """The final policy on held-out levels, each played ``test_repeats`` times."""
     from learner.core.checkpoint import load_checkpoint
-    from learner.core.kuka_policy import policy_snapshot
+    from learner.core.policy import policy_snapshot
     from learner.experiments.level_sources import UniformLevels
     from rollout_worker.actor import WorkerSettings
     from rollout_worker.pool import WorkerPool

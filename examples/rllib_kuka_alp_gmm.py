@@ -34,10 +34,10 @@ from ray.tune.registry import register_env
 
 from common.client.curriculum_wrapper import TOKEN_VARIABLE, CurriculumRegistration, CurriculumWrapper
 from common.client.teacher_client import TeacherClient
+from common.families.kuka import kuka_teacher_params
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
-from learner.core.config import kuka_teacher_params
 
 ENV_NAME = "kuka-grasp-curriculum"
 

@@ -28,10 +28,10 @@ from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
 from common.client.teacher_client import TeacherClient
+from common.families.kuka import kuka_teacher_params
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import add_teacher_flags
-from learner.core.config import kuka_teacher_params
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

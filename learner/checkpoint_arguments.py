@@ -8,29 +8,30 @@ import pickle
 from pathlib import Path
 
 from common.client.task_space import Task, TaskSpace
-from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
-from common.levels import is_level_env
+from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.arguments import UsageError
 from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 
 TASK_HELP = (
-    "'hardest' (the evaluation setting of the checkpoint's environment; for KukaGrasp-v0 the book's), 'easiest', "
-    "or name=value overrides on the hardest task, e.g. 'jp2=1.0,rnd_obj_ang=0.5' (start with 'easiest,' to "
-    "override the easiest one)"
+    "'hardest' (the evaluation setting of the checkpoint's environment: for KukaGrasp-v0 the book's, on a level "
+    "space held-out levels), 'easiest', or name=value overrides on the hardest task, e.g. 'jp2=1.0,rnd_obj_ang=0.5' "
+    "(start with 'easiest,' to override the easiest one; on a level space 'level=5' plays that level)"
 )
 
 
-def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE) -> Task:
-    """A task of ``space`` from the command line: an anchor name, optionally followed by ``name=value`` overrides."""
+def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE, evaluation: Task | None = None) -> Task:
+    """A task of ``space`` from the command line: an anchor name, optionally followed by ``name=value`` overrides.
+    'hardest' is ``evaluation`` where given (the family's evaluation task: none for held-out levels)."""
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
         raise ValueError(f"empty task; expected {TASK_HELP}")
-    base = space.hardest()
+    hardest = space.hardest() if evaluation is None else evaluation
+    base = hardest
     if "=" not in items[0]:
         anchor = items.pop(0)
         if anchor not in ("hardest", "easiest"):
             raise ValueError(f"unknown task {anchor!r}; expected {TASK_HELP}")
-        base = space.hardest() if anchor == "hardest" else space.easiest()
+        base = hardest if anchor == "hardest" else space.easiest()
     overrides: dict[str, float] = {}
     for item in items:
         name, separator, value = (part.strip() for part in item.partition("="))
@@ -43,19 +44,20 @@ def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE) -> Task:
             overrides[name] = float(value)
         except ValueError:
             raise ValueError(f"task parameter {name!r} must be a number, got {value!r}") from None
-    return space.validate({**base, **overrides})
+    task = {**base, **overrides}
+    return space.validate(task) if task else task
 
 
 def checkpoint_task(text: str, checkpoint: Checkpoint) -> Task:
-    """``parse_task`` in the task space of the environment the checkpoint was trained on; a bad task,
-    or a checkpoint of a level family (which ``evaluate`` and ``render`` do not play), is a usage error."""
-    if is_level_env(checkpoint.config.env):
-        raise UsageError(
-            f"{checkpoint.path} was trained on the level family {checkpoint.config.env}; evaluate and render play "
-            "the KUKA families (its held-out success is eval/success_rate in the run's metrics.jsonl)"
-        )
+    """``parse_task`` in the task space of the environment the checkpoint was trained on (a user's
+    ``module:EnvId`` imported again); a bad task, or an environment that no longer loads, is a usage error."""
+    config = checkpoint.config
     try:
-        return parse_task(text, task_space_for(checkpoint.config.env))
+        config.family.check(config.env)
+    except ValueError as error:
+        raise UsageError(f"{checkpoint.path} was trained on {config.env}: {error}") from None
+    try:
+        return parse_task(text, config.task_space(), config.evaluation_task())
     except ValueError as error:
         raise UsageError(f"--task: {error}") from None
 

@@ -1,12 +1,12 @@
-"""A policy's deterministic score on one task, with error bars: the final evaluation of ``evaluate``
-and ``bakeoff``.
+"""A policy's score on one task, with error bars: the final evaluation of ``evaluate`` and ``bakeoff``.
 
-The deterministic policy (the Gaussian's mean), or the scripted controller it is read against, plays a
-fixed number of episodes on one task. Episode ``i`` is seeded ``seed + i`` and the results are put back
-in episode order, so the figures depend on the policy, the task and the seed only, never on how many
-processes shared the work. Each episode also records where its block lay and how the gripper met it
-(``common.kuka.diagnostics``). Processes are plain CPU workers (no Ray, no teacher): evaluation must
-work on a laptop with nothing else running.
+The policy acts as its family evaluates (the Gaussian's mean; a categorical policy samples), or the scripted
+controller it is read against on a KUKA family plays, for a fixed number of episodes on one task (none: held-out
+levels). Episode ``i`` plays the family's ``i``-th episode seed from ``seed`` and the results are put back in
+episode order; a sampling policy draws from a generator seeded by the episode's seed, so the figures depend on
+the policy, the task and the seed only, never on how many processes shared the work. On a KUKA family each
+episode also records where its block lay and how the gripper met it (``common.kuka.diagnostics``). Processes are
+plain CPU workers (no Ray, no teacher): evaluation must work on a laptop with nothing else running.
 """
 
 from __future__ import annotations
@@ -23,16 +23,17 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from common.client.task_space import Task, TaskSpace
+from common.client.task_space import MAX_LEVELS, Task, TaskSpace
+from common.families import TaskFamily, family_for
+from common.families.base import Controller, is_level_space
 from common.kuka import ENV_ID
-from common.kuka.diagnostics import Controller, EpisodeDiagnostics, play_episode
-from common.kuka.env import KukaGraspEnv, make_kuka_env
-from common.kuka.scripted import scripted_action
-from common.kuka.task_space import KUKA_TASK_SPACE, task_space_for
+from common.kuka.diagnostics import EpisodeDiagnostics
+from common.kuka.task_space import KUKA_TASK_SPACE
+from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats
 from learner.core.checkpoint import Checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 from learner.episode_diagnostics import success_by_band
 from learner.json_file import write_json
 from learner.process_pool import StoppablePool
@@ -40,7 +41,12 @@ from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 
 
 def describe_task(task: Task, space: TaskSpace = KUKA_TASK_SPACE) -> str:
-    """'hardest task', or the nearer anchor and what differs from it: 'easiest task with jp2=1'."""
+    """'hardest task', or the nearer anchor and what differs from it: 'easiest task with jp2=1'; on a level
+    space 'held-out levels' (no task) or the level."""
+    if not task:
+        return "held-out levels"
+    if is_level_space(space):
+        return ", ".join(f"{name} {value:g}" for name, value in task.items())
     anchors = {name: getattr(space, name)() for name in ("hardest", "easiest")}
     changes = {
         name: [f"{key}={value:g}" for key, value in task.items() if value != anchor[key]]
@@ -92,11 +98,16 @@ class EvaluationResult:
         returns, success = self.returns, self.success_rate
         spread = "n/a" if math.isnan(returns.half_width) else f"{returns.half_width:.2f}"
         return (
-            f"{self._where()}{describe_task(self.task, task_space_for(self.env))}, {len(self.episodes)} episodes: "
+            f"{self._where()}{describe_task(self.task, self.task_space())}, {len(self.episodes)} episodes: "
             f"return {returns.estimate:.2f} ± {spread} ({CONFIDENCE:.0%} CI), "
             f"success {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] (Wilson {CONFIDENCE:.0%}), "
             f"mean length {self.mean_length:.0f}"
         )
+
+    def task_space(self) -> TaskSpace:
+        """The space ``task`` is a point of (a MiniGrid family's at its largest training set, which holds the
+        level of any run's task)."""
+        return family_for(self.env).task_space(self.env, MAX_LEVELS)
 
     def _where(self) -> str:
         """The environment, named where it is not the default one."""
@@ -153,7 +164,7 @@ class EvaluationResult:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvaluationResult:
         env = str(data.get("env", ENV_ID))  # results from before the hard family were all KukaGrasp-v0's
-        task = task_space_for(env).validate(data["task"])
+        task = dict(data["task"])
         per_episode = data["per_episode"]
         episodes = tuple(
             EpisodeStats(task=task, reward=float(reward), success=bool(success), length=int(length))
@@ -177,7 +188,7 @@ class EvaluationResult:
             else ()
         )
         limit = data.get("max_episode_steps")
-        return cls(
+        result = cls(
             task=task,
             seed=int(data["seed"]),
             episodes=episodes,
@@ -185,6 +196,7 @@ class EvaluationResult:
             diagnostics=diagnostics,
             max_episode_steps=None if limit is None else int(limit),
         )
+        return replace(result, task=result.task_space().validate(task)) if task else result
 
 
 def pooled_episodes(
@@ -219,36 +231,50 @@ DIAGNOSTICS_COLUMNS = (
 LATER_DIAGNOSTICS_COLUMNS = ("touchdown_wrist_turn_degrees",)
 """Columns read back too where a result has them: results written before they were recorded lack them."""
 
-Played = tuple[EpisodeStats, EpisodeDiagnostics]
+Played = tuple[EpisodeStats, EpisodeDiagnostics | None]
+"""An episode's figures, and its diagnostics where its family records them (KUKA's)."""
 
 
-def controller(snapshot: PolicySnapshot | None) -> Controller:
-    """The deterministic policy of ``snapshot`` (the Gaussian's mean), or the scripted controller for None."""
-    if snapshot is None:
-        return scripted_action
-    policy = InferencePolicy(snapshot)
-    return lambda observation: policy.act(observation[None], deterministic=True)[0][0]
+class _Player:
+    """Plays one episode per seed on one environment: the family's way (with diagnostics on a KUKA family), the
+    policy acting as the family evaluates, or the family's scripted controller for no snapshot."""
+
+    def __init__(self, family: TaskFamily, env_id: str, snapshot: PolicySnapshot | None, max_steps: int) -> None:
+        self.family = family
+        self.env = family.make_env(env_id, max_steps)
+        self.policy = None if snapshot is None else InferencePolicy(snapshot)
+        self.act: Controller = family.scripted_controller(env_id) if snapshot is None else self._policy_action
+
+    def _policy_action(self, observation: np.ndarray) -> np.ndarray:
+        assert self.policy is not None
+        action: np.ndarray = self.policy.act(observation[None], self.family.deterministic_evaluation)[0][0]
+        return action
+
+    def play(self, task: Task, seed: int) -> Played:
+        if self.policy is not None:
+            self.policy.rng = np.random.default_rng(seed)  # a sampling policy's draws belong to its episode
+        episode = self.family.play_episode(self.env, task, self.act, seed)
+        stats = EpisodeStats(task, episode.reward, episode.success, episode.length)
+        return stats, cast(EpisodeDiagnostics | None, episode.diagnostics)
+
+    def close(self) -> None:
+        self.env.close()  # type: ignore[no-untyped-call]  # gymnasium's Env.close is unannotated
 
 
-_worker: tuple[KukaGraspEnv, Controller, Task] | None = None
-"""Each pool process's environment, controller and task, built once by ``_start_worker``."""
+_worker: tuple[_Player, Task] | None = None
+"""Each pool process's player and task, built once by ``_start_worker``."""
 
 
 def _start_worker(snapshot: PolicySnapshot | None, task: Task, max_episode_steps: int, env_id: str) -> None:
     global _worker
     torch.set_num_threads(1)
-    _worker = (make_kuka_env(env_id, max_steps=max_episode_steps), controller(snapshot), task)
-
-
-def _play(env: KukaGraspEnv, act: Controller, task: Task, seed: int) -> Played:
-    episode = play_episode(env, task, act, seed)
-    return EpisodeStats(task, episode.reward, episode.success, episode.length), episode.diagnostics
+    _worker = (_Player(family_for(env_id), env_id, snapshot, max_episode_steps), task)
 
 
 def _play_episode(seed: int) -> Played:
     assert _worker is not None, "the pool runs _start_worker in each process before any episode"
-    env, act, task = _worker
-    return _play(env, act, task, seed)
+    player, task = _worker
+    return player.play(task, seed)
 
 
 def evaluate_policy(
@@ -260,9 +286,11 @@ def evaluate_policy(
     max_episode_steps: int = 1000,
     progress: bool = True,
     env_id: str = ENV_ID,
+    levels: int = DEFAULT_LEVELS,
 ) -> EvaluationResult:
-    """Play ``episodes`` deterministic episodes of ``env_id``, seeded ``seed``, ``seed + 1``, ...; a
-    ``snapshot`` of None plays the scripted controller.
+    """Play ``episodes`` episodes of ``env_id`` on ``task`` from the family's episode seeds for ``seed``
+    (``seed``, ``seed + 1``, ...; held-out levels on a level space); a ``snapshot`` of None plays the scripted
+    controller. ``levels`` sizes a MiniGrid family's task space, in which ``task`` is checked.
 
     ``processes=None`` uses one process per available CPU (at most one per episode); with one,
     the episodes run in this process.
@@ -271,17 +299,18 @@ def evaluate_policy(
         raise ValueError(f"episodes must be at least 1, got {episodes}")
     if processes is not None and processes < 1:
         raise ValueError(f"processes must be at least 1, got {processes}")
-    task = task_space_for(env_id).validate(task)
+    family = family_for(env_id)
+    task = family.task_space(env_id, levels).validate(task) if task else task
     processes = min(processes or available_cpus(), episodes)
-    seeds = [seed + index for index in range(episodes)]
+    seeds = family.episode_seeds(env_id, levels, seed, episodes)
     results: list[Played | None] = [None] * episodes
     with tqdm(total=episodes, desc="evaluating", unit="episode", disable=not progress, dynamic_ncols=True) as bar:
         if processes == 1:
-            env, act = make_kuka_env(env_id, max_steps=max_episode_steps), controller(snapshot)
+            player = _Player(family, env_id, snapshot, max_episode_steps)
             for index, episode_seed in enumerate(seeds):
-                results[index] = _play(env, act, task, episode_seed)
+                results[index] = player.play(task, episode_seed)
                 bar.update()
-            env.close()
+            player.close()
         else:
             # spawn, not fork: the parent may hold Ray's and torch's threads, which fork does not copy safely.
             with StoppablePool(
@@ -296,13 +325,14 @@ def evaluate_policy(
                     bar.update()
     # Every index was filled above: the loop or the pool answered each seed.
     played = cast(list[Played], results)
+    diagnostics = tuple(each for _, each in played if each is not None)
     # As written: a result's figures, in a bake-off's table or read back from its file, are the same.
     return EvaluationResult(
         task=task,
         seed=seed,
         episodes=tuple(stats for stats, _ in played),
         env=env_id,
-        diagnostics=tuple(diagnostics for _, diagnostics in played),
+        diagnostics=diagnostics if len(diagnostics) == episodes else (),
         max_episode_steps=max_episode_steps,
     ).as_written()
 
@@ -327,6 +357,7 @@ def evaluate_checkpoint(
         max_episode_steps or checkpoint.config.max_episode_steps,
         progress,
         checkpoint.config.env,
+        checkpoint.config.levels,
     )
 
 
@@ -341,7 +372,7 @@ def scripted_evaluation(
     """The scripted controller on ``env_id``'s hardest task, the yardstick beside a bake-off's policies,
     read from ``cache`` when it holds the same episodes (environment, task, seeds and step limit) and
     written there when not."""
-    task = task_space_for(env_id).hardest()
+    task = family_for(env_id).evaluation_task(env_id, DEFAULT_LEVELS)
     if cache.exists():
         cached = EvaluationResult.from_dict(json.loads(cache.read_text(encoding="utf-8")))
         played = (cached.env, cached.task, cached.seed, len(cached.episodes), cached.max_episode_steps)

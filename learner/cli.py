@@ -153,6 +153,7 @@ def _train(args: argparse.Namespace) -> int:
             raise UsageError(f"--resume: no checkpoint in {args.run_dir / 'checkpoints'}")
     try:
         config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
+        config.family.check(config.env)  # a user's module:EnvId imports, registers and declares a task space
     except ValueError as error:
         raise UsageError(str(error)) from None
     if checkpoint is not None and config.env != checkpoint.config.env:

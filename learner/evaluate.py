@@ -1,8 +1,9 @@
 """``kuka-curriculum evaluate``: how good is a checkpoint, with error bars, and where it fails.
 
-The deterministic policy plays a fixed number of seeded episodes on one task of the environment it
-was trained on (the checkpoint records it; ``--task`` names a point of its task space); the figures
-come from ``checkpoint_evaluation``. Each episode records where its block lay and how the gripper met
+The policy plays a fixed number of seeded episodes on one task of the environment it was trained on (the
+checkpoint records it, a user's ``module:EnvId`` included; ``--task`` names a point of its task space, by
+default its evaluation task: the hardest, or held-out levels); the figures come from
+``checkpoint_evaluation``. On a KUKA family each episode records where its block lay and how the gripper met
 it, and the printout splits success by how far the block lay beyond the arm's reach.
 ``--scripted`` also plays the scripted controller on the same episodes, the yardstick a policy is read
 against; without a checkpoint it plays alone, on ``--env``.
@@ -65,9 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def placement_line(result: EvaluationResult) -> str:
-    """Success by placement band, one line: 'by placement: inside the clamp 72% (38), ...'."""
+    """Success by placement band, one line: 'by placement: inside the clamp 72% (38), ...'; nothing where the
+    episodes recorded no placements (a family other than KUKA's)."""
+    if not result.diagnostics:
+        return ""
     bands = success_by_band(result.diagnosed())
-    return "by placement: " + ", ".join(f"{band.label} {band.cell()}" for band in bands)
+    return "\nby placement: " + ", ".join(f"{band.label} {band.cell()}" for band in bands)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -92,7 +96,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             args.max_episode_steps or DEFAULT_MAX_STEPS,
             env_id=env,
         )
-        print(f"scripted controller: {scripted.summary()}\n{placement_line(scripted)}")
+        print(f"scripted controller: {scripted.summary()}{placement_line(scripted)}")
         if args.json is not None:
             write_json(args.json, scripted_record(scripted))
         return 0
@@ -103,7 +107,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     task = checkpoint_task(args.task, checkpoint)
     result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
     print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
-    print(f"{result.summary()}\n{placement_line(result)}")
+    print(f"{result.summary()}{placement_line(result)}")
     record = {
         "checkpoint": str(checkpoint.path),
         "steps": checkpoint.counters.steps,
@@ -111,10 +115,14 @@ def _evaluate(args: argparse.Namespace) -> int:
     }
     if args.scripted:
         steps = args.max_episode_steps or checkpoint.config.max_episode_steps
+        try:
+            checkpoint.config.family.scripted_controller(checkpoint.config.env)
+        except ValueError as error:
+            raise UsageError(f"--scripted: {error}") from None
         scripted = evaluate_policy(
             None, task, args.episodes, args.seed, args.processes, steps, env_id=checkpoint.config.env
         )
-        print(f"scripted controller, the same episodes: {scripted.summary()}\n{placement_line(scripted)}")
+        print(f"scripted controller, the same episodes: {scripted.summary()}{placement_line(scripted)}")
         record["scripted"] = scripted_record(scripted)
     if args.json is not None:
         write_json(args.json, {**record, **result.to_dict()})

@@ -1,10 +1,10 @@
-"""``kuka-curriculum render``: a video of a checkpoint's policy at work, for people.
+"""``kuka-curriculum render``: a video of a checkpoint's policy at work, for people, on any family.
 
-Frames come from pybullet's CPU renderer, so it works headless. Every frame is labelled with the
-episode, the step, the return so far and, at the end, whether the grasp succeeded; the last
-frame of an episode is held for a moment so the outcome can be read. Episode ``i`` is seeded
-``seed + i``, as in ``kuka-curriculum evaluate``, so the film shows the first episodes of the
-evaluation with the same seed.
+Frames come from the environment's ``render()`` in ``rgb_array`` mode (pybullet's CPU renderer on KUKA, so it
+works headless), small ones enlarged so the labels fit. Every frame is labelled with the episode, the step, the
+return so far and, at the end, whether the episode succeeded; the last frame of an episode is held for a moment
+so the outcome can be read. Episodes take the same seeds as ``kuka-curriculum evaluate``'s with the same
+``--seed``, and the policy acts as there, so the film shows the first episodes of that evaluation.
 """
 
 from __future__ import annotations
@@ -12,23 +12,30 @@ from __future__ import annotations
 import argparse
 import importlib.util
 from pathlib import Path
+from typing import Any
 
+import gymnasium as gym
 import imageio.v3 as iio
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
 from common.client.task_space import Task
+from common.families import family_for
 from common.kuka import ENV_ID
-from common.kuka.env import KukaGraspEnv, make_kuka_env
+from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from learner.arguments import UsageError, positive_int, run_command
 from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 
-STEPS_PER_FRAME = 8
-"""A step is 1/240 s of physics: one frame in eight plays at real speed (30 frames per second)."""
-FRAMES_PER_SECOND = KukaGraspEnv.metadata["render_fps"] / STEPS_PER_FRAME
+FRAMES_PER_SECOND = 30.0
+"""The film's rate at most: an environment rendering faster (KUKA's 240 steps a second of physics) is filmed
+one step in several, so it plays at its own speed."""
+DEFAULT_RENDER_FPS = 10.0
+"""Steps a second for an environment whose metadata names no ``render_fps``."""
+MIN_FRAME_HEIGHT = 240
+"""Smaller frames (a grid's few pixels) are enlarged, pixels kept sharp, to at least this height."""
 HOLD_LAST_FRAME_S = 1.0
 FORMATS = (".gif", ".mp4")
 
@@ -70,11 +77,20 @@ def label_frame(
     return np.asarray(Image.alpha_composite(image, band).convert("RGB"))
 
 
-def camera_frame(env: KukaGraspEnv) -> np.ndarray:
-    """``env.render()`` for an environment made with ``render_mode="rgb_array"``, which always renders."""
-    frame = env.render()
-    assert frame is not None, "the environment was made without render_mode='rgb_array'"
-    return frame
+def camera_frame(env: gym.Env[np.ndarray, Any]) -> np.ndarray:
+    """``env.render()`` for an environment made with ``render_mode="rgb_array"``, enlarged when small."""
+    frame: Any = env.render()
+    if not isinstance(frame, np.ndarray) or frame.ndim != 3:
+        raise UsageError(f"{env.spec.id if env.spec else env}: render() in rgb_array mode gave no RGB image")
+    image: np.ndarray = np.ascontiguousarray(frame[..., :3], dtype=np.uint8)
+    scale = -(-MIN_FRAME_HEIGHT // image.shape[0])
+    return image.repeat(scale, axis=0).repeat(scale, axis=1) if scale > 1 else image
+
+
+def steps_per_frame(env: gym.Env[np.ndarray, Any]) -> int:
+    """One frame in this many steps plays the environment at its own speed within ``FRAMES_PER_SECOND``."""
+    fps = float(env.metadata.get("render_fps") or DEFAULT_RENDER_FPS)
+    return max(1, round(fps / FRAMES_PER_SECOND))
 
 
 def film_episodes(
@@ -85,43 +101,57 @@ def film_episodes(
     max_episode_steps: int = 1000,
     progress: bool = True,
     env_id: str = ENV_ID,
-) -> list[np.ndarray]:
-    """Labelled frames of ``episodes`` deterministic episodes of ``env_id``, one frame per ``STEPS_PER_FRAME`` steps."""
+    levels: int = DEFAULT_LEVELS,
+) -> tuple[list[np.ndarray], float]:
+    """Labelled frames of ``episodes`` episodes of ``env_id`` on ``task`` (none: held-out levels), the policy
+    acting as its family evaluates, and the film's frames per second."""
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
-    env = make_kuka_env(env_id, render_mode="rgb_array", max_steps=max_episode_steps, task=task)
+    family = family_for(env_id)
+    env = family.make_env(env_id, max_episode_steps, render_mode="rgb_array")
     policy = InferencePolicy(snapshot)
-    low, high = env.action_space.low, env.action_space.high
-    hold = round(HOLD_LAST_FRAME_S * FRAMES_PER_SECOND)
+    discrete = isinstance(env.action_space, gym.spaces.Discrete)
+    box = env.action_space if isinstance(env.action_space, gym.spaces.Box) else None
+    every = steps_per_frame(env)
+    fps = min(FRAMES_PER_SECOND, float(env.metadata.get("render_fps") or DEFAULT_RENDER_FPS))
+    hold = round(HOLD_LAST_FRAME_S * fps)
     frames: list[np.ndarray] = []
+    seeds = family.episode_seeds(env_id, levels, seed, episodes)
     try:
-        for episode in tqdm(range(1, episodes + 1), desc="filming", unit="episode", disable=not progress):
-            observation, _ = env.reset(seed=seed + episode - 1, options={"task": task})
+        for episode, episode_seed in enumerate(
+            tqdm(seeds, desc="filming", unit="episode", disable=not progress), start=1
+        ):
+            policy.rng = np.random.default_rng(episode_seed)  # as evaluate draws a sampling policy's actions
+            observation, _ = env.reset(seed=episode_seed, options={"task": task})
             step, episode_return, done, success = 0, 0.0, False, None
             frames.append(label_frame(camera_frame(env), episode, episodes, step, episode_return, success))
             while not done:
-                action, _, _ = policy.act(observation[None], deterministic=True)
-                observation, reward, terminated, truncated, info = env.step(np.clip(action[0], low, high))
+                action, _, _ = policy.act(observation[None], deterministic=family.deterministic_evaluation)
+                if discrete:
+                    observation, reward, terminated, truncated, info = env.step(int(action[0, 0]))
+                else:
+                    assert box is not None, "a family's actions are Discrete or a Box"
+                    observation, reward, terminated, truncated, info = env.step(np.clip(action[0], box.low, box.high))
                 step += 1
                 episode_return += float(reward)
                 done = terminated or truncated
                 if done:
-                    success = bool(info["is_success"])
-                if done or step % STEPS_PER_FRAME == 0:
+                    success = bool(info.get("is_success", False))
+                if done or step % every == 0:
                     frames.append(label_frame(camera_frame(env), episode, episodes, step, episode_return, success))
             frames.extend([frames[-1]] * hold)
     finally:
-        env.close()
-    return frames
+        env.close()  # type: ignore[no-untyped-call]  # gymnasium's Env.close is unannotated
+    return frames, fps
 
 
-def write_video(path: Path, frames: list[np.ndarray]) -> None:
+def write_video(path: Path, frames: list[np.ndarray], fps: float = FRAMES_PER_SECOND) -> None:
     check_output(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
-        iio.imwrite(path, frames, duration=1000 / FRAMES_PER_SECOND, loop=0)
+        iio.imwrite(path, frames, duration=1000 / fps, loop=0)
     else:
-        iio.imwrite(path, frames, plugin="FFMPEG", fps=FRAMES_PER_SECOND)
+        iio.imwrite(path, frames, plugin="FFMPEG", fps=fps)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -156,14 +186,15 @@ def _render(args: argparse.Namespace) -> int:
     check_output(args.out)
     checkpoint = read_checkpoint(args.checkpoint)
     task = checkpoint_task(args.task, checkpoint)
-    frames = film_episodes(
+    frames, fps = film_episodes(
         policy_snapshot(checkpoint),
         task,
         args.episodes,
         args.seed,
         args.max_episode_steps or checkpoint.config.max_episode_steps,
         env_id=checkpoint.config.env,
+        levels=checkpoint.config.levels,
     )
-    write_video(args.out, frames)
+    write_video(args.out, frames, fps)
     print(args.out)
     return 0

@@ -83,15 +83,12 @@ def reachable_teacher(url: str) -> str:
 
 def register_curriculum(url: str, name: str, config: TrainConfig, token: SecretStr | None) -> None:
     from common.client.teacher_client import TeacherClient, TeacherClientError
-    from common.kuka.task_space import task_space_for
-    from common.levels import is_level_env, level_task_space
 
-    space = level_task_space(config.levels) if is_level_env(config.env) else task_space_for(config.env)
     with TeacherClient(url, name, token=token) as client:
         try:
             client.register(
                 config.teacher,
-                space,
+                config.task_space(),
                 params=config.teacher_params,
                 seed=config.seed,
                 timeout=TEACHER_CONNECT_TIMEOUT_S,

@@ -5,20 +5,31 @@ from __future__ import annotations
 
 import argparse
 
+from common.client.task_space import MAX_LEVELS
+from common.families import family_for
 from common.kuka import ENV_IDS
-from common.levels import LEVEL_ENV_IDS, MAX_LEVELS
 from learner.arguments import positive_int
-from learner.core.config import LOOPS, TRAIN_ENV_IDS, TrainConfig
+from learner.core.config import LISTED_ENV_IDS, LOOPS, TrainConfig
 
 DEFAULTS = TrainConfig()
+
+
+def env_id(text: str) -> str:
+    """An ``--env`` some family owns (a listed id, or ``module:EnvId``); whether a user's module imports and
+    declares a task space is checked once the run's settings are known."""
+    try:
+        family_for(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return text
 
 
 def add_training_flags(group: argparse._ArgumentGroup, *, defaults_given: bool, level_families: bool = False) -> None:
     """``--env``, ``--workers``, ``--envs-per-worker``, ``--rollout-length``, ``--max-episode-steps``,
     ``--checkpoint-every`` and ``--loop``. With ``defaults_given`` a flag left out takes its default (a
     bake-off's runs all train alike); without, it is None, so ``train --resume`` keeps a run's saved value.
-    ``level_families``: ``--env`` also takes the MiniGrid level families, and ``--levels`` sets their
-    training set (``train``; a bake-off evaluates the KUKA families' hardest task)."""
+    ``level_families``: ``--env`` also takes the MiniGrid level families and any ``module:EnvId``, and
+    ``--levels`` sets a MiniGrid family's training set (``train``; a bake-off plays the KUKA families)."""
 
     whole_numbers = (
         ("--workers", DEFAULTS.workers, "rollout actors"),
@@ -29,23 +40,24 @@ def add_training_flags(group: argparse._ArgumentGroup, *, defaults_given: bool, 
     )
     group.add_argument(
         "--env",
-        choices=TRAIN_ENV_IDS if level_families else ENV_IDS,
+        **({"type": env_id, "metavar": "ENV"} if level_families else {"choices": ENV_IDS}),
         default=DEFAULTS.env if defaults_given else None,
-        help=f"task family: the environment and its task space, whose hardest task is evaluated "
-        f"(default {DEFAULTS.env})"
+        help=f"the environment, whose task space the teacher draws from and whose hardest task (or held-out "
+        f"levels) is evaluated: {', '.join(LISTED_ENV_IDS if level_families else ENV_IDS)}"
         + (
-            f"; a MiniGrid level family ({', '.join(LEVEL_ENV_IDS)}) takes its tasks as levels, the reset seeds "
-            "0 to --levels - 1, and is evaluated on held-out seeds from 1,000,000"
+            ", or any gymnasium environment with a task space as module:EnvId (docs/own-environment.md); a "
+            "MiniGrid level family takes its tasks as levels, the reset seeds 0 to --levels - 1"
             if level_families
             else ""
-        ),
+        )
+        + f" (default {DEFAULTS.env})",
     )
     if level_families:
         group.add_argument(
             "--levels",
             type=positive_int,
             default=DEFAULTS.levels if defaults_given else None,
-            help=f"a level family's training levels, at most {MAX_LEVELS:,} (default {DEFAULTS.levels:,})",
+            help=f"a MiniGrid level family's training levels, at most {MAX_LEVELS:,} (default {DEFAULTS.levels:,})",
         )
     for flag, default, what in whole_numbers:
         group.add_argument(

@@ -1,4 +1,4 @@
-"""The rollout actor: environments (KUKA's, or a MiniGrid level family's), a teacher client and the
+"""The rollout actor: environments of a run's task family (``common.families``), a teacher client and the
 sampling loop in one Ray process.
 
 Every episode's task comes from the teacher service and its result goes straight back there; the
@@ -11,8 +11,8 @@ start-up time.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -22,9 +22,8 @@ from pydantic import SecretStr
 
 from common.client.task_space import Task
 from common.client.teacher_client import Assignment, TeacherClient
+from common.families import family_for
 from common.kuka import ENV_ID
-from common.kuka.env import make_kuka_env
-from common.levels import is_level_env
 from common.policy.inference import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from rollout_worker.sampler import Sampler, ScoreDiscount, TaskSource, run_episodes
@@ -50,8 +49,7 @@ class WorkerSettings:
     teacher_token: SecretStr | None = None
     """Held as a ``SecretStr`` so that no repr or log line of the settings shows it."""
     env_id: str = ENV_ID
-    """The environment the workers step: a KUKA family (``common.kuka.ENV_IDS``) or a level family
-    (``common.levels.LEVEL_ENV_IDS``)."""
+    """The environment the workers step, of any task family (``common.families``)."""
     score_discount: ScoreDiscount | None = None
     """The learner's discount and GAE lambda: each episode's result carries its positive value loss as its
     score (None: results go without a score)."""
@@ -62,21 +60,9 @@ class WorkerSettings:
     """Where tasks come from and results go instead of the teacher service (None: the service at
     ``teacher_url``): a benchmark's stand-in, such as no curriculum at all or another library's
     curriculum, run with the same workers and learner."""
-    edge_placement_share: float = 0.0
-    """A hard KUKA family's training placements: the share of far points drawn beyond the arm's clamp
-    (``KukaGraspHardEnv``); evaluation episodes keep the task's own draw."""
-
-
-def make_env(env_id: str, max_steps: int, edge_placement_share: float = 0.0) -> gym.Env[np.ndarray, Any]:
-    """A bare environment of a KUKA family, or a level family's (its level the reset seed); a nonzero
-    ``edge_placement_share`` goes to a hard KUKA family's placement."""
-    if is_level_env(env_id):
-        from common.levels.env import make_level_env  # here: minigrid loads only for a level family
-
-        return make_level_env(env_id, max_steps=max_steps)
-    if edge_placement_share:
-        return make_kuka_env(env_id, max_steps=max_steps, edge_placement_share=edge_placement_share)
-    return make_kuka_env(env_id, max_steps=max_steps)
+    env_options: Mapping[str, Any] = field(default_factory=dict)
+    """The family's training-only options for the training environments (a hard KUKA family's
+    ``edge_placement_share``); evaluation episodes play the environment without them."""
 
 
 class _TeacherTasks:
@@ -119,8 +105,9 @@ class RolloutWorker:
                 max_buffered_results=settings.results_buffer,
             )
             tasks = _TeacherTasks(self.client)
+        self.family = family_for(settings.env_id)
         envs = [
-            make_env(settings.env_id, settings.max_episode_steps, settings.edge_placement_share)
+            self.family.make_env(settings.env_id, settings.max_episode_steps, options=settings.env_options)
             for _ in range(settings.num_envs)
         ]
         self.sampler = Sampler(envs, tasks, seed, settings.score_discount)
@@ -145,12 +132,11 @@ class RolloutWorker:
         return dataclasses.replace(batch, results_waiting=self.client.pending, results_dropped=dropped)
 
     def evaluate(self, snapshot: PolicySnapshot, task: Task, seeds: Sequence[int]) -> list[EpisodeStats]:
-        """Episodes on an environment of their own, so training episodes are not disturbed: deterministic on a
-        KUKA family; a level family's categorical policy samples its actions (its likeliest action alone
-        can turn on the spot for ever)."""
+        """Episodes on an environment of their own, so training episodes are not disturbed, acting as the family
+        evaluates (``TaskFamily.deterministic_evaluation``)."""
         if self.evaluation_env is None:
-            self.evaluation_env = make_env(self.settings.env_id, self.settings.max_episode_steps)
-        deterministic = not is_level_env(self.settings.env_id)
+            self.evaluation_env = self.family.make_env(self.settings.env_id, self.settings.max_episode_steps)
+        deterministic = self.family.deterministic_evaluation
         return run_episodes(self.evaluation_env, self._load(snapshot), task, seeds, deterministic=deterministic)
 
     def close(self) -> None:

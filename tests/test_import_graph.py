@@ -22,10 +22,19 @@ MAY_IMPORT: dict[str, set[str]] = {
     "common.client": set(),
     "common.kuka": {"common.client"},
     "common.levels": {"common.client"},
+    "common.families": {"common.client", "common.kuka", "common.levels", "common.policy"},
     "common.policy": {"common.client"},
     "teacher_service": {"common.client"},
-    "rollout_worker": {"common.client", "common.kuka", "common.levels", "common.policy"},
-    "learner": {"common.client", "common.kuka", "common.levels", "common.policy", "rollout_worker", "teacher_service"},
+    "rollout_worker": {"common.client", "common.families", "common.kuka", "common.policy"},
+    "learner": {
+        "common.client",
+        "common.families",
+        "common.kuka",
+        "common.levels",
+        "common.policy",
+        "rollout_worker",
+        "teacher_service",
+    },
     DISPATCHER: {"common.kuka", "learner", "teacher_service"},
 }
 """Each room and the rooms below it that it may use; a room may always use itself."""

@@ -21,6 +21,10 @@ Task = dict[str, float]
 
 ParameterType = Literal["float", "integer"]
 PARAMETER_TYPES: tuple[ParameterType, ...] = ("float", "integer")
+MAX_LEVELS = 10_000
+"""The most levels (value combinations) of an integer space that the service's level kinds track: SFL's held-out
+set, above Procgen's 200 training levels. Each level costs a kind a few array entries (a draw a few passes over
+them, a snapshot about 25 bytes a level), so a larger space is a 422. Trainers size their level sets by it too."""
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,15 @@
-"""Level families: MiniGrid environments whose level is the reset seed, their ids and task space.
+"""MiniGrid level families: their ids, task space and environment, whose level is the reset seed.
 
 A level family's task is one integer parameter, ``level``: the environment resets with that number as
 its seed, so a training set of N levels is the seeds 0 to N - 1, and held-out evaluation plays seeds from
-``HELD_OUT_FIRST_SEED`` up, outside every training set. Importing this package needs neither minigrid
-nor pybullet; ``common.levels.env`` makes the environments (minigrid, the ``levels`` extra).
+``common.families.base.HELD_OUT_FIRST_SEED`` up, outside every training set (the family,
+``common.families.minigrid``, says so). Importing this package needs neither minigrid nor pybullet;
+``common.levels.env`` makes the environments (minigrid, the ``levels`` extra).
 """
 
 from __future__ import annotations
 
-from common.client.task_space import Parameter, TaskSpace
+from common.client.task_space import MAX_LEVELS, Parameter, TaskSpace
 
 LEVEL_ENV_IDS = (
     "MiniGrid-DoorKey-5x5-v0",
@@ -16,20 +17,12 @@ LEVEL_ENV_IDS = (
     "MiniGrid-MultiRoom-N4-S5-v1",
     "MiniGrid-KeyCorridorS3R2-v0",
 )
-"""The MiniGrid environments ``train --env`` accepts: each draws its whole layout (walls, doors, keys, goal)
+"""The MiniGrid environments ``train --env`` lists: each draws its whole layout (walls, doors, keys, goal)
 from the reset seed, and pays a positive reward only for reaching its goal. DoorKey-5x5 learns in
 minutes on two cores; the others need millions of steps, and are where a level teacher can matter."""
 
 DEFAULT_LEVELS = 1000
 """Training levels of a run unless it sets ``TrainConfig.levels``."""
-MAX_LEVELS = 10_000
-"""The most levels the service's level kinds track (a larger space is a 422)."""
-HELD_OUT_FIRST_SEED = 1_000_000
-"""Held-out levels are the seeds from here up, outside any training set of at most ``MAX_LEVELS``."""
-
-
-def is_level_env(env_id: str) -> bool:
-    return env_id in LEVEL_ENV_IDS
 
 
 def level_task_space(levels: int) -> TaskSpace:
@@ -39,17 +32,4 @@ def level_task_space(levels: int) -> TaskSpace:
     return TaskSpace([Parameter("level", 0, levels - 1, type="integer", doc="The environment's reset seed.")])
 
 
-def held_out_seeds(episodes: int) -> list[int]:
-    """The reset seeds of ``episodes`` held-out levels, the same in every evaluation of a run."""
-    return [HELD_OUT_FIRST_SEED + index for index in range(episodes)]
-
-
-__all__ = [
-    "DEFAULT_LEVELS",
-    "HELD_OUT_FIRST_SEED",
-    "LEVEL_ENV_IDS",
-    "MAX_LEVELS",
-    "held_out_seeds",
-    "is_level_env",
-    "level_task_space",
-]
+__all__ = ["DEFAULT_LEVELS", "LEVEL_ENV_IDS", "level_task_space"]

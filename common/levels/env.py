@@ -59,16 +59,9 @@ class LevelEnv(gymnasium.Wrapper[np.ndarray, np.int64, Any, Any]):
         return np.asarray(image, dtype=np.float32).reshape(-1)
 
 
-def make_level_env(env_id: str, max_steps: int | None = None) -> LevelEnv:
-    """A level family's environment (one of ``LEVEL_ENV_IDS``), cut at ``max_steps`` if that is sooner."""
+def make_level_env(env_id: str, max_steps: int | None = None, render_mode: str | None = None) -> LevelEnv:
+    """A level family's environment (one of ``LEVEL_ENV_IDS``), cut at ``max_steps`` if that is sooner;
+    ``render_mode="rgb_array"`` draws MiniGrid's full view for ``render``."""
     if env_id not in LEVEL_ENV_IDS:
         raise ValueError(f"unknown level environment {env_id!r}; expected one of {', '.join(LEVEL_ENV_IDS)}")
-    return LevelEnv(gymnasium.make(env_id), max_steps=max_steps)
-
-
-def action_count(env: gymnasium.Env[Any, Any]) -> int:
-    """How many actions a level family's ``Discrete`` action space holds."""
-    space = env.action_space
-    if not isinstance(space, gymnasium.spaces.Discrete):
-        raise TypeError(f"a level family's actions are Discrete, got {space}")
-    return int(space.n)
+    return LevelEnv(gymnasium.make(env_id, render_mode=render_mode), max_steps=max_steps)

@@ -11,14 +11,13 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from common.kuka import ENV_ID, ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
-from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS, MAX_LEVELS, is_level_env
+from common.client.task_space import MAX_LEVELS, Task, TaskSpace
+from common.families import TaskFamily, family_for, listed_env_ids
+from common.families.base import EVALUATION_SEED_SCHEMES, EvaluationSeeds
+from common.families.kuka import EDGE_PLACEMENT_SHARE
+from common.kuka import ENV_ID
+from common.levels import DEFAULT_LEVELS
 from common.policy.noise import LOG_STD_BOUNDS
-from learner.core.periodic_evaluation import (
-    EVALUATION_SEED_SCHEMES,
-    MAX_STRATIFIED_EPISODES,
-    EvaluationSeeds,
-)
 from teacher_service.teachers import TEACHER_KINDS
 
 if TYPE_CHECKING:
@@ -133,31 +132,9 @@ _OPTIONAL_FLOATS = ("target_kl", "min_log_std")
 TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_KINDS)
 """Every teacher kind the service knows, in its registry's order (``teacher_service.teachers``)."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
-TRAIN_ENV_IDS: tuple[str, ...] = (*ENV_IDS, *LEVEL_ENV_IDS)
-"""What ``train --env`` takes: the KUKA families, then the MiniGrid level families (``common.levels``)."""
-
-KUKA_TEACHER_PARAMS: dict[str, dict[str, Any]] = {
-    "alp-gmm": {"reward_range": [-5.0, 10.0], "target_task_ratio": 0.2},
-    "adr": {"reward_range": [0.0, 10.0]},
-    "self-paced": {"reward_range": [0.0, 10.0]},
-    "manual": {"metric": "reward", "threshold": 5.5},
-    "currot": {"delta": 5.0, "estimate": "recent"},
-}
-"""Teacher parameters for the KUKA curriculum, on top of each teacher's own defaults. ALP-GMM
-clusters learning progress together with task coordinates rescaled to [0, 1], so the scaled return
-(about -3 for a miss, about +9 for a grasp) is mapped onto [0, 1] too, and a fifth of its tasks are
-the hardest task, which its other tasks rarely reach in the outer part of the test's range. ADR and
-self-paced map a KUKA return onto [0, 1] by [0, 10] (a grasp pays about +10) when a result carries no
-success, the lesson plan moves on at the book's mean reward of 5.5, and CURROT holds a return to 5
-(half a grasp) and estimates from its recent results rather than its authors' lasting success
-buffer. Why each, with the runs that chose them: docs/results/bakeoff-v0.md and
-docs/results/bakeoff-hard.md."""
-
-
-def kuka_teacher_params(teacher: str, overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """What a KUKA curriculum is registered with: ``KUKA_TEACHER_PARAMS``, then the overrides. The
-    training CLI and the examples share it, so one teacher name means one configuration everywhere."""
-    return {**KUKA_TEACHER_PARAMS.get(teacher, {}), **overrides}
+LISTED_ENV_IDS: tuple[str, ...] = listed_env_ids()
+"""The ids ``train --env`` lists: the KUKA families, then the MiniGrid level families; it also takes any
+gymnasium environment with a task space as ``module:EnvId`` (``common.families``)."""
 
 
 @dataclass(frozen=True)
@@ -165,9 +142,9 @@ class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
     """Curriculum teacher, one of ``TEACHERS``: manual is the book's lesson plan, fixed the hardest task alone."""
     env: str = ENV_ID
-    """Task family: KukaGrasp-v0, KukaGraspHard-v0 or -v1, or a MiniGrid level family (levels = reset seeds)."""
+    """The environment: a KUKA family, a MiniGrid level family (levels = reset seeds) or module:EnvId."""
     levels: int = DEFAULT_LEVELS
-    """A level family's training set: the reset seeds 0 to levels - 1 (the KUKA families ignore it)."""
+    """A MiniGrid level family's training set: the reset seeds 0 to levels - 1 (other families ignore it)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
     workers: int = 2
@@ -191,13 +168,13 @@ class TrainConfig:
     edge_placement_share: float = 0.0
     """Share of a hard KUKA family's far training placements drawn beyond the arm's x clamp (never evaluations')."""
     teacher_overrides: dict[str, Any] = field(default_factory=dict)
-    """Teacher parameters on top of ``KUKA_TEACHER_PARAMS`` (the service validates them at registration)."""
+    """Teacher parameters on top of the family's (``TaskFamily.teacher_params``); the service validates them."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """Algorithm hyperparameters."""
 
     def __post_init__(self) -> None:
         _require(self.teacher in TEACHERS, f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
-        _require(self.env in TRAIN_ENV_IDS, f"env must be one of {', '.join(TRAIN_ENV_IDS)}, got {self.env!r}")
+        family = family_for(self.env)  # an UnusableEnvironment, a ValueError, for an id no family owns
         _require(1 <= self.levels <= MAX_LEVELS, f"levels must be between 1 and {MAX_LEVELS:,}, got {self.levels}")
         _require(self.total_steps >= 1, "total_steps must be at least 1")
         _require(self.workers >= 1, "workers must be at least 1")
@@ -210,27 +187,40 @@ class TrainConfig:
             self.eval_seeds in EVALUATION_SEED_SCHEMES,
             f"eval_seeds must be one of {', '.join(EVALUATION_SEED_SCHEMES)}, got {self.eval_seeds!r}",
         )
-        _require(
-            self.eval_seeds != "stratified" or is_level_env(self.env) or self.eval_episodes <= MAX_STRATIFIED_EPISODES,
-            f"stratified evaluation seeds take at most {MAX_STRATIFIED_EPISODES:,} eval_episodes",
-        )
+        family.check_evaluation(self.env, self.eval_episodes, self.eval_seeds)
         _require(self.loop in LOOPS, f"loop must be one of {', '.join(LOOPS)}, got {self.loop!r}")
         _require(
             0.0 <= self.edge_placement_share <= 1.0,
             f"edge_placement_share must be between 0 and 1, got {self.edge_placement_share}",
         )
-        _require(
-            self.edge_placement_share == 0.0 or self.env in (HARD_ENV_ID, HARD_V1_ENV_ID),
-            f"edge_placement_share needs a hard KUKA family ({HARD_ENV_ID} or {HARD_V1_ENV_ID}), not {self.env}",
-        )
+        family.check_options(self.env, self.env_options)
+
+    @property
+    def family(self) -> TaskFamily:
+        return family_for(self.env)
+
+    @property
+    def env_options(self) -> dict[str, Any]:
+        """The family's training-only options that this run sets (``TaskFamily.options``)."""
+        return {EDGE_PLACEMENT_SHARE: self.edge_placement_share} if self.edge_placement_share else {}
 
     @property
     def teacher_params(self) -> dict[str, Any]:
-        """What the curriculum is registered with: ``kuka_teacher_params`` on a KUKA family; on a level
-        family the overrides alone, on the teacher's own defaults."""
-        if is_level_env(self.env):
-            return dict(self.teacher_overrides)
-        return kuka_teacher_params(self.teacher, self.teacher_overrides)
+        """What the curriculum is registered with: the overrides on the family's parameters for the kind
+        (``TaskFamily.teacher_params``: KUKA's ``KUKA_TEACHER_PARAMS``, the kind's own defaults elsewhere)."""
+        return self.family.teacher_params(self.teacher, self.teacher_overrides)
+
+    def task_space(self) -> TaskSpace:
+        """The space the run's curriculum draws tasks from."""
+        return self.family.task_space(self.env, self.levels)
+
+    def evaluation_task(self) -> Task:
+        """The task the in-run evaluations play: the hardest, or none (held-out levels)."""
+        return self.family.evaluation_task(self.env, self.levels)
+
+    def evaluation_seeds(self) -> list[int]:
+        """The in-run evaluations' seeds, the same all run long."""
+        return self.family.evaluation_seeds(self.env, self.levels, self.eval_episodes, self.eval_seeds)
 
     @property
     def batch_size(self) -> int:

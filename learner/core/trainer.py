@@ -35,9 +35,9 @@ from common.policy.actor_critic import PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 from learner.core.checkpoint import Checkpoint, Counters, save_checkpoint
 from learner.core.config import TrainConfig
-from learner.core.kuka_policy import policy_spec_for
 from learner.core.metrics import MetricsLog
-from learner.core.periodic_evaluation import evaluation_metrics, evaluation_seeds, evaluation_task
+from learner.core.periodic_evaluation import evaluation_metrics
+from learner.core.policy import policy_spec_for
 from learner.core.ppo import PPOLearner
 from rollout_worker.actor import TaskSourceFactory, WorkerSettings
 from rollout_worker.pool import InFlight, WorkerPool
@@ -111,7 +111,7 @@ class Trainer:
             env_id=self.config.env,
             score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
             task_source=self.task_source,
-            edge_placement_share=self.config.edge_placement_share,
+            env_options=self.config.env_options,
         )
 
     def run(self, on_iteration: Callable[[IterationReport], None] | None = None) -> Path:
@@ -247,8 +247,8 @@ class _IterationLoop:
             self._collect_evaluation()  # still running: one at a time, in order
         episodes = self.pool.start_evaluation(
             snapshot_ref,
-            evaluation_task(self.config.env),
-            evaluation_seeds(self.config.eval_episodes, self.config.env, self.config.eval_seeds),
+            self.config.evaluation_task(),
+            self.config.evaluation_seeds(),
         )
         self.evaluation = _Evaluation(episodes, self.held[-1][1], time.perf_counter())
 

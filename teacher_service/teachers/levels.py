@@ -22,8 +22,8 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import Field
 
-from common.client.task_space import Task, TaskSpace
-from teacher_service.teachers.algorithms.levels import MAX_LEVELS, LearningProgress, LevelReplay
+from common.client.task_space import MAX_LEVELS, Task, TaskSpace
+from teacher_service.teachers.algorithms.levels import LearningProgress, LevelReplay
 from teacher_service.teachers.base import EpisodeResult, FitJob, Teacher
 from teacher_service.teachers.draws import TASK_STREAM, indexed_uniforms
 from teacher_service.teachers.params import TeacherParams

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from example_runner import curriculum_state, finish, results_received, start_example
 
-from learner.core.config import KUKA_TEACHER_PARAMS
+from common.families.kuka import KUKA_TEACHER_PARAMS
 
 CURRICULUM = "kuka-sb3-alp-gmm"
 TOTAL_STEPS = 8_192

@@ -16,7 +16,7 @@ import numpy as np
 
 from common.policy.inference import InferencePolicy
 from learner.core.checkpoint import load_checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 
 MODEL = Path(__file__).parents[2] / "models" / "alp-gmm-3m-seed2.pt"
 RECORDED = Path(__file__).with_name("committed_policy_recorded.npz")

@@ -46,7 +46,10 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
     ("make", "message"),
     [
         (lambda: TrainConfig(teacher="curious"), "teacher must be one of"),
-        (lambda: TrainConfig(env="KukaGrasp-v9"), "env must be one of KukaGrasp-v0, KukaGraspHard-v0"),
+        (
+            lambda: TrainConfig(env="KukaGrasp-v9"),
+            "unknown environment .* expected one of KukaGrasp-v0, KukaGraspHard-v0",
+        ),
         (lambda: TrainConfig(workers=0), "workers"),
         (lambda: TrainConfig(total_steps=0), "total_steps"),
         (lambda: TrainConfig(env="KukaGraspHard-v1", edge_placement_share=1.5), "edge_placement_share must be"),

@@ -26,7 +26,7 @@ from learner.checkpoint_evaluation import (
     significant,
 )
 from learner.core.checkpoint import load_checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 from learner.episode_diagnostics import success_by_band
 from learner.stats import mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes

@@ -19,7 +19,7 @@ from learner.core.checkpoint import (
     load_checkpoint,
     save_evaluation_only,
 )
-from learner.core.kuka_policy import policy_snapshot, policy_spec_for
+from learner.core.policy import policy_snapshot, policy_spec_for
 from learner.core.ppo import PPOLearner
 from teacher_service.process import free_port
 

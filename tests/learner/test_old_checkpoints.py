@@ -9,7 +9,7 @@ from tiny_checkpoint import save_untrained_checkpoint
 
 from common.policy.actor_critic import InferencePolicy
 from learner.core.checkpoint import load_checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 
 
 def test_a_checkpoint_from_before_the_student_options_loads_and_acts_the_same(tmp_path):

@@ -8,11 +8,12 @@ import time
 
 import pytest
 
+from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
 from kuka_curriculum import main
 from learner.core.checkpoint import Counters, save_checkpoint
 from learner.core.config import TrainConfig
-from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.policy import policy_spec_for
 from learner.core.ppo import PPOLearner
 from teacher_service.process import free_port
 
@@ -47,7 +48,7 @@ def test_resume_needs_a_checkpoint_and_a_finished_run_is_not_overwritten(tmp_pat
     assert "no checkpoint" in capsys.readouterr().err
 
     config = TrainConfig()
-    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    learner = PPOLearner(policy_spec_for(ENV_ID, config.ppo), config.ppo, seed=0)
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
     assert main(["train", "--run-dir", str(run_dir)]) == 2
     assert "pass --resume" in capsys.readouterr().err
@@ -60,7 +61,7 @@ def test_resume_if_exists_starts_a_new_run_or_continues_an_existing_one(tmp_path
     assert "cannot reach Ray" in capsys.readouterr().err
 
     config = TrainConfig(teacher="manual")
-    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    learner = PPOLearner(policy_spec_for(ENV_ID, config.ppo), config.ppo, seed=0)
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
     assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), *unreachable_ray]) == 2
     assert "cannot reach Ray" in capsys.readouterr().err
@@ -119,7 +120,7 @@ def test_an_unknown_environment_is_refused_by_name(capsys):
 def test_a_run_keeps_its_environment_when_resumed(tmp_path, capsys):
     run_dir = tmp_path / "run"
     config = TrainConfig()
-    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed=0)
+    learner = PPOLearner(policy_spec_for(ENV_ID, config.ppo), config.ppo, seed=0)
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=10), config)
     assert main(["train", "--resume-if-exists", "--run-dir", str(run_dir), "--env", "KukaGraspHard-v0"]) == 2
     assert "trains on KukaGrasp-v0; choose another --run-dir for a run on KukaGraspHard-v0" in capsys.readouterr().err

@@ -16,7 +16,7 @@ from test_train_e2e import metrics
 
 from common.client.teacher_client import TeacherClient
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
-from learner.core.kuka_policy import policy_snapshot
+from learner.core.policy import policy_snapshot
 from learner.session import curriculum_name
 from learner.teacher_process import local_teacher_service
 

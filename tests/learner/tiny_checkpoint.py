@@ -7,7 +7,7 @@ from pathlib import Path
 from common.kuka import ENV_ID
 from learner.core.checkpoint import Counters, save_checkpoint
 from learner.core.config import PPOConfig, TrainConfig
-from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.policy import policy_spec_for
 from learner.core.ppo import PPOLearner
 
 TINY_EPISODE_STEPS = 40
@@ -21,5 +21,5 @@ def save_untrained_checkpoint(run_dir: Path, seed: int = 0, env: str = ENV_ID) -
         max_episode_steps=TINY_EPISODE_STEPS,
         ppo=PPOConfig(hidden_sizes=(16, 16)),
     )
-    learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, seed)
+    learner = PPOLearner(policy_spec_for(ENV_ID, config.ppo), config.ppo, seed)
     return save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=512, episodes=4), config)

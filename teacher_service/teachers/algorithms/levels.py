@@ -13,12 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from common.client.task_space import MAX_LEVELS
 from teacher_service.teachers.state import ARRAY, INT, StateField
-
-MAX_LEVELS = 10_000
-"""The most levels a level kind tracks: SFL's held-out set (10,000), above Procgen's 200 training
-levels and the MiniGrid training sets of 200 to 4,000. A draw costs a few passes over this many
-entries, an update one entry, and a snapshot about 25 bytes per level."""
 
 
 def rank_weights(scores: np.ndarray, temperature: float) -> np.ndarray:

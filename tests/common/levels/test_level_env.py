@@ -7,8 +7,10 @@ import gymnasium
 import numpy as np
 import pytest
 
-from common.levels import HELD_OUT_FIRST_SEED, LEVEL_ENV_IDS, MAX_LEVELS, held_out_seeds, level_task_space
-from common.levels.env import action_count, make_level_env
+from common.client.task_space import MAX_LEVELS
+from common.families.base import HELD_OUT_FIRST_SEED, held_out_seeds
+from common.levels import LEVEL_ENV_IDS, level_task_space
+from common.levels.env import make_level_env
 
 
 @pytest.mark.parametrize("env_id", LEVEL_ENV_IDS)
@@ -25,7 +27,7 @@ def test_the_level_is_the_reset_seed(env_id):
     assert np.array_equal(seeded, first)
     assert env.observation_space == gymnasium.spaces.Box(0.0, 255.0, (147,), np.float32)
     assert first.dtype == np.float32 and first.shape == (147,)
-    assert action_count(env) == 7
+    assert env.action_space == gymnasium.spaces.Discrete(7)
     env.close()
 
 

@@ -17,11 +17,12 @@ import sys
 from pathlib import Path
 from learner.core.checkpoint import Counters, save_checkpoint
 from learner.core.config import PPOConfig, TrainConfig
-from learner.core.kuka_policy import kuka_policy_spec
+from common.kuka import ENV_ID
+from learner.core.policy import policy_spec_for
 from learner.core.ppo import PPOLearner
 
 config = TrainConfig(teacher="fixed", ppo=PPOConfig(hidden_sizes=(1024, 1024)))
-learner = PPOLearner(kuka_policy_spec(config.ppo), config.ppo, 0)
+learner = PPOLearner(policy_spec_for(ENV_ID, config.ppo), config.ppo, 0)
 state = learner.state_dict()
 for step in range(1, 10_000):
     save_checkpoint(Path(sys.argv[1]), state, Counters(iteration=step, steps=step * 100), config)

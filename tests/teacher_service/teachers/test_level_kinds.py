@@ -8,9 +8,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from common.client.task_space import Parameter, TaskSpace
+from common.client.task_space import MAX_LEVELS, Parameter, TaskSpace
 from teacher_service.teachers import EpisodeResult, make_teacher
-from teacher_service.teachers.algorithms.levels import MAX_LEVELS
 
 TEN = TaskSpace([Parameter("level", 0, 9, type="integer")])
 

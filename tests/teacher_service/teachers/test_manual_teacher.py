@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from common.client.task_space import Parameter, TaskSpace
+from common.families.kuka import KUKA_TEACHER_PARAMS
 from common.kuka.task_space import DEFAULT_JP2, DEFAULT_JP4, KUKA_TASK_SPACE
-from learner.core.config import KUKA_TEACHER_PARAMS
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teacher_service.teachers.algorithms.levels import MAX_LEVELS, LearningProgress, LevelReplay, pick, rank_weights
+from common.client.task_space import MAX_LEVELS
+from teacher_service.teachers.algorithms.levels import LearningProgress, LevelReplay, pick, rank_weights
 
 
 def test_rank_weights_follow_one_over_rank_to_the_inverse_temperature() -> None:

@@ -9,18 +9,19 @@ import pytest
 
 from common.kuka import ENV_ID, HARD_V1_ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics, beyond_clamp
-from common.levels import HELD_OUT_FIRST_SEED, LEVEL_ENV_IDS
-from learner.core.config import TrainConfig
-from learner.core.periodic_evaluation import (
+from common.families import family_for
+from common.families.base import HELD_OUT_FIRST_SEED
+from common.kuka.evaluation_seeds import (
     CANDIDATES_PER_EPISODE,
     EVALUATION_SEED_OFFSET,
     FINAL_EVALUATION_SEED,
     MAX_STRATIFIED_EPISODES,
     candidate_placements,
     clockwise,
-    evaluation_seeds,
     stratified_seeds,
 )
+from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS
+from learner.core.config import TrainConfig
 from learner.episode_diagnostics import BAND_LABELS, band_of
 from learner.experiments.success_by_turn import turn_sense
 
@@ -31,6 +32,11 @@ V1_CURVE_SEEDS = [
     10592, 10173, 10508, 10443, 10284, 10307, 10287, 10423, 10528, 10925,
 ]  # fmt: skip
 """The 20 curve episodes of a KukaGraspHard-v1 bake-off with --curve-episodes 20, as the rule first picked them."""
+
+
+def evaluation_seeds(episodes: int, env_id: str, scheme: str = "consecutive") -> list[int]:
+    """A run's in-run evaluation seeds on ``env_id``, as its family picks them."""
+    return family_for(env_id).evaluation_seeds(env_id, DEFAULT_LEVELS, episodes, scheme)  # type: ignore[arg-type]
 
 
 def band_counts(env_id: str, seeds: list[int]) -> np.ndarray:
@@ -114,12 +120,8 @@ def test_the_seeds_run_from_the_nearest_block_to_the_farthest():
 
 
 def test_consecutive_seeds_and_level_families_are_as_before():
-    assert evaluation_seeds(2, ENV_ID, "consecutive") == evaluation_seeds(2) == [10_000, 10_001]
+    assert evaluation_seeds(2, ENV_ID, "consecutive") == [10_000, 10_001]
     assert evaluation_seeds(3, LEVEL_ENV_IDS[0], "stratified") == [HELD_OUT_FIRST_SEED + k for k in range(3)]
-    with pytest.raises(ValueError, match="name its env_id"):
-        evaluation_seeds(2, None, "stratified")
-    with pytest.raises(ValueError, match="must be one of consecutive, stratified"):
-        evaluation_seeds(2, ENV_ID, "random")  # type: ignore[arg-type]
 
 
 def test_a_run_saved_before_the_stratified_seeds_resumes_on_its_consecutive_seeds():

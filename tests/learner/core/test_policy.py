@@ -1,15 +1,15 @@
 import numpy as np
 import pytest
 
-from common.kuka import HARD_V1_ENV_ID
+from common.kuka import ENV_ID, HARD_V1_ENV_ID
 from common.kuka.env import BLOCK_Z, make_kuka_env
 from common.policy.inference import ObservationFeatures
 from learner.core.config import PPOConfig, TrainConfig
-from learner.core.kuka_policy import kuka_policy_spec
+from learner.core.policy import policy_spec_for
 
 
 def test_the_world_block_offset_is_where_the_simulator_has_the_block_from_the_gripper():
-    spec = kuka_policy_spec(PPOConfig(world_block_offset=True))
+    spec = policy_spec_for(ENV_ID, PPOConfig(world_block_offset=True))
     features = ObservationFeatures(spec)
     env = make_kuka_env(HARD_V1_ENV_ID)
     rng = np.random.default_rng(0)
@@ -30,7 +30,7 @@ def test_the_world_block_offset_is_where_the_simulator_has_the_block_from_the_gr
 
 
 def test_without_the_option_the_networks_inputs_are_as_before():
-    plain, extended = kuka_policy_spec(PPOConfig()), kuka_policy_spec(PPOConfig(world_block_offset=True))
+    plain, extended = policy_spec_for(ENV_ID, PPOConfig()), policy_spec_for(ENV_ID, PPOConfig(world_block_offset=True))
     assert plain.world_offsets == ()
     assert plain.feature_dim == 9 + 4
     assert extended.feature_dim == plain.feature_dim + 2
@@ -45,7 +45,9 @@ def test_the_option_survives_a_checkpoints_config_round_trip(value):
 
 @pytest.mark.parametrize("half_turn", [True, False])
 def test_with_half_turn_block_yaw_a_block_turned_half_a_turn_looks_the_same_to_the_networks(half_turn):
-    features = ObservationFeatures(kuka_policy_spec(PPOConfig(world_block_offset=True, half_turn_block_yaw=half_turn)))
+    features = ObservationFeatures(
+        policy_spec_for(ENV_ID, PPOConfig(world_block_offset=True, half_turn_block_yaw=half_turn))
+    )
     env = make_kuka_env(HARD_V1_ENV_ID)
     try:
         env.reset(seed=3)
