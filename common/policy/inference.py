@@ -11,8 +11,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
+from typing import TypeGuard
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from common.policy.noise import LOG_STD_BOUNDS
 from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState
@@ -32,6 +35,14 @@ class WorldOffset:
     @property
     def indices(self) -> tuple[int, ...]:
         return (self.x_index, self.y_index, *self.euler_indices)
+
+
+MIN_IMAGE_SIDE = 5
+"""The smallest image side ``actor_critic.image_encoder`` takes: its two 3x3 convolutions without padding
+each take 2 pixels off a side."""
+
+PIXEL_SCALE = 1.0 / 255.0
+"""What both sides multiply pixels by before the first convolution."""
 
 
 @dataclass(frozen=True)
@@ -57,8 +68,14 @@ class PolicySpec:
     """Actions are one of ``action_dim`` choices (gymnasium's ``Discrete(action_dim)``), drawn from a categorical
     distribution over the actor head's ``action_dim`` logits; batches carry each as its index, one float per
     step. The log-std options do not apply. False: a Gaussian over a box of ``action_dim`` dimensions."""
+    image_shape: tuple[int, int, int] | None = None
+    """(height, width, channels) of an image observation (pixels 0..255), which arrives flattened in row-major
+    (height, width, channels) order, ``image.reshape(-1)``, as float32: each network then starts with a small
+    CNN (``actor_critic.image_encoder``) and the observation normaliser is not applied. None: a flat vector."""
 
     def __post_init__(self) -> None:
+        if self.image_shape is not None:
+            self._check_image()
         if self.categorical and (self.state_dependent_std or self.min_log_std is not None or self.action_dim < 2):
             raise ValueError(
                 "a categorical policy needs at least 2 actions and has no log-std "
@@ -84,6 +101,21 @@ class PolicySpec:
                 f"got {self.half_turn_indices}"
             )
 
+    def _check_image(self) -> None:
+        """An image is the whole observation, and pixels are no angles or offsets."""
+        assert self.image_shape is not None
+        height, width, channels = self.image_shape
+        if min(height, width) < MIN_IMAGE_SIDE or channels < 1 or self.obs_dim != height * width * channels:
+            raise ValueError(
+                f"image_shape must be (height, width, channels), each side at least {MIN_IMAGE_SIDE}, with "
+                f"obs_dim = height * width * channels, got {self.image_shape} for obs_dim {self.obs_dim}"
+            )
+        if self.angle_indices or self.world_offsets or self.half_turn_indices:
+            raise ValueError(
+                "an image observation has no angle_indices, world_offsets or half_turn_indices, "
+                f"got {self.angle_indices}, {self.world_offsets}, {self.half_turn_indices}"
+            )
+
     def _distinct_entries(self, indices: tuple[int, ...]) -> bool:
         """Whether ``indices`` name distinct entries of an observation."""
         return len(set(indices)) == len(indices) and all(0 <= index < self.obs_dim for index in indices)
@@ -92,6 +124,13 @@ class PolicySpec:
     def feature_dim(self) -> int:
         """Width of the networks' input: every angle becomes two features, every world offset adds two."""
         return self.obs_dim + len(self.angle_indices) + 2 * len(self.world_offsets)
+
+    @property
+    def normalizes_observations(self) -> bool:
+        """Whether the running normaliser scales the networks' inputs: not an image's, whose encoder scales its
+        pixels by a fixed 1/255 (per-pixel statistics would make a rare bright pixel huge). The learner and
+        ``InferencePolicy`` both ask here."""
+        return self.image_shape is None
 
     @property
     def log_std_range(self) -> tuple[float, float]:
@@ -150,6 +189,9 @@ LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
 _LOG_SQRT_2PI_FLOAT32 = np.float32(LOG_SQRT_2PI)
 
 
+Activation = Callable[[np.ndarray], np.ndarray]
+
+
 @dataclass(frozen=True)
 class DenseLayer:
     """One ``nn.Linear`` of a network head as numpy, with the activations the head applies after it."""
@@ -157,7 +199,45 @@ class DenseLayer:
     weight: np.ndarray
     """(out_features, in_features), as torch stores it."""
     bias: np.ndarray
-    activations: tuple[Callable[[np.ndarray], np.ndarray], ...]
+    activations: tuple[Activation, ...]
+
+
+@dataclass(frozen=True)
+class ImageInputLayer:
+    """What ``actor_critic.ImageInput`` does, a head's first step on image observations: flat observations
+    to images (n, height, width, channels) of pixels times ``PIXEL_SCALE``. Numpy keeps the channels last,
+    where torch moves them first: a patch of a channels-last image is one strided view (``ConvLayer``)."""
+
+    shape: tuple[int, int, int]
+    """(height, width, channels)."""
+
+
+@dataclass(frozen=True)
+class ConvLayer:
+    """One ``nn.Conv2d`` (no padding, no dilation, one group) of a head's image encoder as numpy, with the
+    activations after it; ``flatten_channels_first`` among them is the encoder's ``nn.Flatten``."""
+
+    weight: np.ndarray
+    """(out_channels, in_channels, kernel_height, kernel_width), as torch stores it."""
+    bias: np.ndarray
+    stride: tuple[int, int]
+    activations: tuple[Activation, ...]
+
+
+Layer = ImageInputLayer | ConvLayer | DenseLayer
+
+
+def relu(hidden: np.ndarray) -> np.ndarray:
+    """``nn.ReLU``'s work, a module-level function so that snapshots holding it pickle."""
+    rectified: np.ndarray = np.maximum(hidden, np.float32(0.0))
+    return rectified
+
+
+def flatten_channels_first(images: np.ndarray) -> np.ndarray:
+    """``nn.Flatten``'s work on channels-last images (n, h, w, c): each image's values in torch's
+    (c, h, w) order, which the next layer's weights were trained to read."""
+    flat: np.ndarray = images.transpose(0, 3, 1, 2).reshape(len(images), -1)
+    return flat
 
 
 @dataclass(frozen=True)
@@ -165,10 +245,11 @@ class PolicySnapshot:
     """The layers and normaliser statistics of one policy version, as plain numpy."""
 
     spec: PolicySpec
-    actor: tuple[DenseLayer, ...]
-    """The action mean's head (and the log-std's, its second half of outputs, where that is per state)."""
-    critic: tuple[DenseLayer, ...]
-    """The value's head."""
+    actor: tuple[Layer, ...]
+    """The action mean's head (and the log-std's, its second half of outputs, where that is per state): an
+    image spec's starts with its image encoder's layers, ``ImageInputLayer`` and ``ConvLayer``."""
+    critic: tuple[Layer, ...]
+    """The value's head, shaped like the actor's."""
     log_std: np.ndarray | None
     """The shared log-std; None where the actor's head outputs it per state, and for a categorical policy."""
     normalizer: NormalizerState
@@ -176,8 +257,12 @@ class PolicySnapshot:
     version: int
 
 
-_Stage = tuple[np.ndarray, np.ndarray, tuple[Callable[[np.ndarray], np.ndarray], ...]]
+_Stage = tuple[np.ndarray, np.ndarray, tuple[Activation, ...]]
 """A ``DenseLayer`` ready to run: weight as (in, out) float32, so the layer is one ``x @ w + b``."""
+
+_Head = tuple[list[Activation], list[_Stage]]
+"""A head ready to run: its image layers as functions of the batch (none for a flat observation), then its
+dense layers as stages."""
 
 
 class InferencePolicy:
@@ -187,9 +272,10 @@ class InferencePolicy:
     not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
     layers run as numpy; when the actor and critic heads have the same shape of layers they are
     fused into one block-diagonal stack when loaded (half the operations), and the observation
-    normaliser's scale is precomputed. The layers are those ``actor_critic.capture_snapshot`` read from the
-    network's modules, so a change to ``ActorCritic``'s heads needs no change here;
-    ``ActorCritic.evaluate`` is the reference these numbers must match.
+    normaliser's scale is precomputed. An image spec's heads each start with their own convolutions, run
+    as im2col (one strided view of every patch) and a matmul, and are not fused. The layers are those
+    ``actor_critic.capture_snapshot`` read from the network's modules, so a change to ``ActorCritic``'s
+    heads needs no change here; ``ActorCritic.evaluate`` is the reference these numbers must match.
     """
 
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
@@ -203,9 +289,10 @@ class InferencePolicy:
     def load(self, snapshot: PolicySnapshot) -> None:
         if snapshot.spec != self.spec:
             raise ValueError(f"snapshot is for {snapshot.spec}, this policy is {self.spec}")
-        fused = _fuse(snapshot.actor, snapshot.critic)
-        heads = [fused] if fused is not None else [snapshot.actor, snapshot.critic]
-        self._heads = [[_stage(layer) for layer in head] for head in heads]
+        actor, critic = snapshot.actor, snapshot.critic
+        fused = _fuse(actor, critic) if _dense_only(actor) and _dense_only(critic) else None
+        heads = [fused] if fused is not None else [actor, critic]
+        self._heads = [_prepared(head) for head in heads]
         if snapshot.log_std is not None:
             log_std = snapshot.log_std.astype(np.float64)
             self._std = np.exp(log_std).astype(np.float32)
@@ -218,8 +305,11 @@ class InferencePolicy:
 
     def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The actor head's outputs (n, action_dim, or twice that with a state-dependent std) and values (n,)."""
-        scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
-        inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
+        if self.spec.normalizes_observations:
+            scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
+            inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
+        else:
+            inputs = np.atleast_2d(observations).astype(np.float32, copy=False)
         if len(self._heads) == 1:
             output = _run(self._heads[0], inputs)
             return output[:, :-1], output[:, -1]
@@ -261,6 +351,10 @@ class InferencePolicy:
         return self._forward(observations)[1]
 
 
+def _dense_only(head: tuple[Layer, ...]) -> TypeGuard[tuple[DenseLayer, ...]]:
+    return all(isinstance(layer, DenseLayer) for layer in head)
+
+
 def _fuse(actor: tuple[DenseLayer, ...], critic: tuple[DenseLayer, ...]) -> tuple[DenseLayer, ...] | None:
     """One stack computing both heads side by side (actor outputs first), or None where their layers
     differ in number or activations. Both heads read the same input, so the first layers stack
@@ -279,11 +373,59 @@ def _fuse(actor: tuple[DenseLayer, ...], critic: tuple[DenseLayer, ...]) -> tupl
     return (first, *later)
 
 
+def _prepared(head: tuple[Layer, ...]) -> _Head:
+    image_steps: list[Activation] = []
+    stages: list[_Stage] = []
+    for layer in head:
+        if isinstance(layer, DenseLayer):
+            stages.append(_stage(layer))
+        elif stages:
+            raise ValueError(f"{type(layer).__name__} after a DenseLayer: a head's image layers come first")
+        elif isinstance(layer, ConvLayer):
+            image_steps.append(_Convolution(layer))
+        else:
+            image_steps.append(partial(_images, shape=layer.shape))
+    return image_steps, stages
+
+
+def _images(observations: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
+    images: np.ndarray = (observations * np.float32(PIXEL_SCALE)).reshape(-1, *shape)
+    return images
+
+
+class _Convolution:
+    """A ``ConvLayer`` ready to run on channels-last images: every patch (one strided view, no copy until the
+    reshape), times the filters as one (in_channels * kernel_height * kernel_width, out_channels) matrix."""
+
+    def __init__(self, layer: ConvLayer) -> None:
+        out_channels, _, kernel_height, kernel_width = layer.weight.shape
+        # A patch's view is laid out (in_channels, kernel_height, kernel_width), as each filter is stored.
+        self.weight = np.ascontiguousarray(layer.weight.reshape(out_channels, -1).T, dtype=np.float32)
+        self.bias = layer.bias.astype(np.float32)
+        self.kernel = (kernel_height, kernel_width)
+        self.stride = layer.stride
+        self.activations = layer.activations
+
+    def __call__(self, images: np.ndarray) -> np.ndarray:
+        row_step, column_step = self.stride
+        patches = sliding_window_view(images, self.kernel, axis=(1, 2))[:, ::row_step, ::column_step]
+        count, height, width = patches.shape[:3]
+        hidden = (patches.reshape(count * height * width, -1) @ self.weight + self.bias).reshape(
+            count, height, width, -1
+        )
+        for activation in self.activations:
+            hidden = activation(hidden)
+        return hidden
+
+
 def _stage(layer: DenseLayer) -> _Stage:
     return np.ascontiguousarray(layer.weight.T, dtype=np.float32), layer.bias.astype(np.float32), layer.activations
 
 
-def _run(stages: list[_Stage], hidden: np.ndarray) -> np.ndarray:
+def _run(head: _Head, hidden: np.ndarray) -> np.ndarray:
+    image_steps, stages = head
+    for step in image_steps:
+        hidden = step(hidden)
     for weight, bias, activations in stages:
         hidden = hidden @ weight + bias
         for activation in activations:
