@@ -100,7 +100,12 @@ def ppo_losses(
 
 
 class PPOLearner:
-    """The network, its optimiser and the observation statistics; ``version`` counts updates."""
+    """The network, its optimiser and the observation statistics; ``version`` counts updates.
+
+    An image spec's normaliser is never updated nor applied (``PolicySpec.normalizes_observations``): its
+    encoder scales the pixels itself. It is kept, at its start, so that checkpoints and snapshots hold the
+    same state whatever the observation.
+    """
 
     def __init__(self, spec: PolicySpec, config: PPOConfig, seed: int) -> None:
         self.config = config
@@ -156,7 +161,9 @@ class PPOLearner:
             old_log_probs, old_values = old_log_probs[index], old_values[index]
             advantages, returns = advantages[index], returns[index]
         features = self.features(raw_observations)
-        observations = torch.from_numpy(self.normalizer.normalize(features))
+        normalizes = self.network.spec.normalizes_observations
+        inputs = self.normalizer.normalize(features) if normalizes else features.astype(np.float32, copy=False)
+        observations = torch.from_numpy(inputs)
         actions = torch.from_numpy(actions_array)
 
         size = observations.shape[0]
@@ -191,7 +198,8 @@ class PPOLearner:
             if cfg.target_kl is not None and losses.approx_kl.item() > cfg.target_kl:
                 break
 
-        self.normalizer.update(features)
+        if normalizes:
+            self.normalizer.update(features)
         self.version += 1
         metrics = {name: torch.stack(values).mean().item() for name, values in stats.items()}
         metrics["learning_rate"] = learning_rate
