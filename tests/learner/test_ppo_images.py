@@ -103,3 +103,22 @@ def test_a_categorical_cnn_policy_learns_which_side_is_bright():
     for iteration in range(10):
         learner.update([sampler.sample(InferencePolicy(learner.snapshot(), seed=iteration), 64)], iteration / 10)
     assert success() >= 0.95 > untrained + 0.3
+
+
+def test_an_image_learners_state_restores_the_same_policy():
+    """What a checkpoint holds: the encoders' weights and the (untouched) normaliser load back as they were."""
+    config = PPOConfig(minibatch_size=32, update_epochs=1, learning_rate=1e-2)
+    learner = PPOLearner(spec(action_dim=2, categorical=True), config, seed=0)
+    batch = Sampler([BrightSide() for _ in range(4)], RecordingTasks(), seed=0).sample(
+        InferencePolicy(learner.snapshot(), seed=0), 16
+    )
+    learner.update([batch])
+    restored = PPOLearner(spec(action_dim=2, categorical=True), config, seed=1)
+    restored.load_policy_state(learner.state_dict())
+    observations = batch.observations.reshape(-1, int(np.prod(SHAPE)))
+    for ours, theirs in zip(
+        InferencePolicy(learner.snapshot(), seed=2).act(observations),
+        InferencePolicy(restored.snapshot(), seed=2).act(observations),
+        strict=True,
+    ):
+        assert np.array_equal(ours, theirs)
