@@ -40,10 +40,12 @@ def parse_task(text: str, space: TaskSpace = KUKA_TASK_SPACE, evaluation: Task |
             raise ValueError(f"bad task item {item!r}: expected name=value; names are {names}")
         if name in overrides:
             raise ValueError(f"task parameter {name!r} is given twice")
+        integer = any(p.name == name and p.type == "integer" for p in space.parameters)
         try:
-            overrides[name] = float(value)
+            overrides[name] = int(value) if integer else float(value)
         except ValueError:
-            raise ValueError(f"task parameter {name!r} must be a number, got {value!r}") from None
+            kind = "a whole number" if integer else "a number"
+            raise ValueError(f"task parameter {name!r} must be {kind}, got {value!r}") from None
     task = {**base, **overrides}
     return space.validate(task) if task else task
 

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from common.client.task_space import Task, TaskSpace
-from common.policy.inference import WorldOffset
+from common.policy.inference import MIN_IMAGE_SIDE, WorldOffset
 
 EvaluationSeeds = Literal["consecutive", "stratified"]
 EVALUATION_SEED_SCHEMES: tuple[EvaluationSeeds, ...] = ("consecutive", "stratified")
@@ -77,6 +77,10 @@ def shape_of_spaces(observation_space: gym.Space[Any], action_space: gym.Space[A
     image_shape: tuple[int, int, int] | None = None
     if len(shape) == 3 and observation_space.dtype == np.uint8:
         image_shape = (shape[0], shape[1], shape[2])
+        if min(image_shape[:2]) < MIN_IMAGE_SIDE:
+            raise UnusableEnvironment(
+                f"an image observation needs sides of {MIN_IMAGE_SIDE} pixels or more, got {shape}"
+            )
     elif len(shape) != 1:
         raise UnusableEnvironment(
             f"the observation must be a flat Box or an image Box (height x width x channels, uint8), got {shape} "

@@ -3,11 +3,9 @@ the agent's view flattened, success a positive return.
 
 The observation is MiniGrid's egocentric image (``minigrid.wrappers.ImgObsWrapper``): 7 x 7 cells in
 front of the agent, each (object, colour, state) codes, flattened to 147 floats for the project's MLP
-actor-critic rather than a CNN. The workers run the policy in numpy (``InferencePolicy``), which knows
-dense layers only, and the view is small: the running observation normaliser scales each cell's codes,
-and MLPs on this flattened view learn the small DoorKey and MultiRoom levels (Stable-Baselines3's
-``MlpPolicy`` in ``examples/sb3_minigrid_plr.py`` does the same). A CNN would pay off on larger views,
-and would need its numpy counterpart in ``common.policy.inference`` first.
+actor-critic. Those codes are categories, not pixels: the running observation normaliser scales each cell's
+codes, and MLPs on this flattened view learn the small DoorKey and MultiRoom levels (Stable-Baselines3's
+``MlpPolicy`` in ``examples/sb3_minigrid_plr.py`` does the same); the policy's CNN is for pixel images.
 """
 
 from __future__ import annotations

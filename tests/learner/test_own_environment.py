@@ -1,0 +1,72 @@
+"""A user's environment, which the project has never seen, trains, evaluates and renders from ``--env
+module:EnvId`` (docs/own-environment.md): ``examples.own_env``'s box-task ``PointReach-v0`` (an MLP and a
+Gaussian, under ALP-GMM) and its image-level ``GridLevels-v0`` (a CNN and a categorical head, under PLR), and an
+environment that breaks the contract is refused in one line with exit code 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import imageio.v3 as iio
+import pytest
+
+from kuka_curriculum import main
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+from learner.core.policy import policy_spec_for
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL_RUN = ["--total-steps", "2048", "--workers", "1", "--envs-per-worker", "2", "--rollout-length", "256"]
+
+
+@pytest.fixture(autouse=True)
+def from_the_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A user runs the commands beside their module: here the checkout, which holds ``examples/``."""
+    monkeypatch.chdir(ROOT)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "teacher", "task", "image", "categorical"),
+    [
+        ("examples.own_env:PointReach-v0", "alp-gmm", "hardest task", False, False),
+        ("examples.own_env:GridLevels-v0", "plr", "held-out levels", True, True),
+    ],
+)
+def test_a_users_environment_trains_evaluates_and_renders(
+    tmp_path, capsys, env_id, teacher, task, image, categorical
+) -> None:
+    run_dir = tmp_path / "run"
+    assert main(["train", "--env", env_id, "--teacher", teacher, "--run-dir", str(run_dir), *SMALL_RUN]) == 0
+    checkpoint = load_checkpoint(latest_checkpoint(run_dir))
+    assert checkpoint.config.env == env_id and checkpoint.counters.steps >= 2048
+    spec = policy_spec_for(env_id, checkpoint.config.ppo)
+    assert (spec.image_shape is not None, spec.categorical) == (image, categorical)
+    capsys.readouterr()
+
+    assert main(["evaluate", str(run_dir), "--episodes", "4", "--processes", "1"]) == 0
+    assert f"{env_id}, {task}, 4 episodes" in capsys.readouterr().out
+
+    film = tmp_path / "policy.gif"
+    assert main(["render", str(run_dir), "--out", str(film), "--episodes", "1"]) == 0
+    frames = iio.imread(film, index=None)
+    assert frames.shape[0] > 2 and frames.shape[1] >= 240  # the small frames enlarged so the labels fit
+
+
+@pytest.mark.parametrize(
+    ("env_id", "message"),
+    [
+        ("no_such_module:Task-v0", "cannot import no_such_module (No module named 'no_such_module')"),
+        ("examples.own_env:Unregistered-v0", "add gymnasium.register(id='Unregistered-v0', entry_point=...)"),
+        ("gymnasium.envs.classic_control:CartPole-v1", "the environment has no task_space attribute; add one"),
+    ],
+)
+def test_an_environment_that_breaks_the_contract_is_one_line_and_exit_2(tmp_path, capsys, env_id, message) -> None:
+    assert main(["train", "--env", env_id, "--run-dir", str(tmp_path / "run")]) == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and len(captured.err.strip().splitlines()) == 1
+    assert "Traceback" not in captured.err and not (tmp_path / "run").exists()
+
+
+def test_a_kind_that_does_not_fit_the_space_is_refused_with_the_services_message(tmp_path, capsys) -> None:
+    env_id = "examples.own_env:GridLevels-v0"
+    assert main(["train", "--env", env_id, "--teacher", "covar-gmm", "--run-dir", str(tmp_path / "run")]) == 2
+    assert "the covar-gmm teacher takes float parameters only" in capsys.readouterr().err
