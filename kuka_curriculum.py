@@ -33,9 +33,9 @@ def _demo() -> CommandModule:
 
 
 def _train() -> CommandModule:
-    from learner import cli
+    from learner.commands import train
 
-    return cli
+    return train
 
 
 def _serve() -> CommandModule:
@@ -45,13 +45,13 @@ def _serve() -> CommandModule:
 
 
 def _evaluate() -> CommandModule:
-    from learner import evaluate
+    from learner.commands import evaluate
 
     return evaluate
 
 
 def _render() -> CommandModule:
-    from learner import render
+    from learner.commands import render
 
     return render
 
@@ -69,7 +69,7 @@ def _tune() -> CommandModule:
 
 
 def _control() -> CommandModule:
-    from learner import control
+    from learner.commands import control
 
     return control
 

@@ -31,7 +31,7 @@ from common.client.teacher_client import TeacherClient
 from common.families.kuka import kuka_teacher_params
 from common.kuka import ENV_ID
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.arguments import add_teacher_flags
+from learner.commands.arguments import add_teacher_flags
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

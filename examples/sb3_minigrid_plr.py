@@ -34,7 +34,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from common.client.curriculum_wrapper import CurriculumRegistration, CurriculumWrapper
 from common.client.task_space import Parameter, TaskSpace
 from common.client.teacher_client import TeacherClient
-from learner.arguments import add_teacher_flags
+from learner.commands.arguments import add_teacher_flags
 
 HELD_OUT_FIRST_SEED = 1_000_000
 

@@ -18,7 +18,7 @@ from typing import Any
 from pydantic import SecretStr
 
 from common.client.write_token import TOKEN_VARIABLE, token_problem
-from learner.arguments import UsageError
+from learner.commands.arguments import UsageError
 from learner.core.config import TrainConfig
 
 RAY_CONNECT_TIMEOUT_S = 5.0

@@ -33,7 +33,7 @@ from common.kuka.diagnostics import play_episode
 from common.kuka.env import make_kuka_env
 from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
 from common.policy.actor_critic import InferencePolicy
-from learner.checkpoint_arguments import read_checkpoint
+from learner.commands.checkpoint_arguments import read_checkpoint
 from learner.core.policy import policy_snapshot
 from learner.experiments.task_hardness import CHUNK, POLICIES, Policy, episode_policy
 from learner.process_pool import StoppablePool

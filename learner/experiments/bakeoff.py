@@ -14,9 +14,10 @@ import argparse
 import functools
 from pathlib import Path
 
-from learner.arguments import add_override_flags, int_at_least, positive_int, run_command
 from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
-from learner.config_file import BakeoffConfigAction
+from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
+from learner.commands.config_file import BakeoffConfigAction
+from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
 from learner.experiments.bakeoff_report import (
     LEARNING_CURVES,
@@ -40,7 +41,6 @@ from learner.experiments.bakeoff_runs import (
 )
 from learner.experiments.bakeoff_statistics import TeacherResult
 from learner.experiments.run_archive import archive_run
-from learner.training_flags import add_training_flags
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,5 +1,6 @@
 """The bake-off's report: ``results.json`` (every figure, per seed included), ``results.md`` (the
-tables a person reads), ``learning_curves.png`` (hardest-task success during training) and
+tables a person reads), ``learning_curves.png`` (hardest-task success during training),
+``performance_profile.png`` (the spread of each teacher's seeds, ``run_statistics``) and
 ``success_by_placement.png`` (where each teacher's students fail, the scripted controller beside them).
 """
 
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from common.client.schemas import TEACHER_LABELS as TEACHER_LABELS  # placement_bands names teachers through here
 from common.kuka import ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
@@ -28,21 +30,20 @@ from learner.experiments.bakeoff_statistics import (
     TeacherResult,
     median_steps,
 )
+from learner.experiments.run_statistics import (
+    REPS,
+    SEED,
+    RunStatistics,
+    plot_performance_profile,
+    run_statistics,
+    statistics_table,
+)
 from learner.json_file import write_json
 from learner.stats import CONFIDENCE, Interval
 
-TEACHER_LABELS = {
-    "alp-gmm": "ALP-GMM",
-    "manual": "Manual lesson plan",
-    "fixed": "No curriculum: hardest task only",
-    "random": "Uniform random tasks",
-    "adr": "ADR",
-    "self-paced": "Self-paced (SPDL)",
-    "currot": "CURROT",
-    "covar-gmm": "Covar-GMM",
-    "riac": "RIAC",
-    "learnability": "Learnability (SFL)",
-}
+DEFAULT_BASELINE = "random"
+"""The teacher every other is compared with, run by run: uniform random tasks, the curriculum a teacher
+must beat to be worth its machinery (the field's usual baseline; the book reports none)."""
 BOOK_RETURNS = {"alp-gmm": 3.71, "fixed": 2.81, "manual": -2.79}
 """The book's chapter 14: mean scaled return over 100 episodes on the hardest task, one seed, ~1.7M steps."""
 
@@ -50,9 +51,18 @@ RESULTS_JSON = "results.json"
 RESULTS_MARKDOWN = "results.md"
 LEARNING_CURVES = "learning_curves.png"
 PLACEMENT_PLOT = "success_by_placement.png"
+PERFORMANCE_PROFILE = "performance_profile.png"
+RUN_STATISTICS_JSON = "run_statistics.json"
+RUN_STATISTICS_MARKDOWN = "run_statistics.md"
+"""What ``recompute_run_statistics`` writes for a bake-off whose results.json predates the run statistics."""
 SCRIPTED_EVALUATION = "scripted_evaluation.json"
 """The scripted controller's episodes on the final evaluation's seeds, cached beside the report."""
 SCRIPTED_LABEL = "Scripted controller (no learning)"
+
+
+def teacher_label(kind: str) -> str:
+    """How the report names a teacher kind; a kind without a label yet keeps its name."""
+    return TEACHER_LABELS.get(kind, kind)
 
 
 def teacher_record(result: TeacherResult) -> dict[str, Any]:
@@ -113,7 +123,7 @@ def placement_rows(
 ) -> list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]]:
     """The placement table's rows: each teacher with diagnosed episodes, then the scripted controller."""
     rows: list[tuple[str, Sequence[tuple[EpisodeDiagnostics, bool]]]] = [
-        (f"{TEACHER_LABELS[result.teacher]} ({counted(len(result.runs), 'seed', 'seeds')})", result.diagnosed)
+        (f"{teacher_label(result.teacher)} ({counted(len(result.runs), 'seed', 'seeds')})", result.diagnosed)
         for result in results
         if result.diagnosed
     ]
@@ -127,7 +137,7 @@ def placement_markdown(results: Sequence[TeacherResult], scripted: EvaluationRes
     rows = placement_rows(results, scripted)
     if not rows:
         return []
-    missing = [TEACHER_LABELS[result.teacher] for result in results if not result.diagnosed]
+    missing = [teacher_label(result.teacher) for result in results if not result.diagnosed]
     low, high = TARGET_X_RANGE
     return [
         "## Where the students fail: success by block placement",
@@ -219,7 +229,7 @@ def results_markdown(
         if name not in ("total_steps", "teacher_params") and value != {}
     )
     registered = "; ".join(
-        _format_setting(TEACHER_LABELS[result.teacher], params)
+        _format_setting(teacher_label(result.teacher), params)
         for result in results
         if (params := registration_params(result.teacher, settings))
     )
@@ -258,7 +268,7 @@ def results_markdown(
         per_seed = ", ".join(f"{rate:.0%}" for rate in result.seed_success_rates)
         steps = [result.seed_steps_to(target) for target in STEP_TARGETS]
         lines.append(
-            f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_interval(success, percent=True)} "
+            f"| {teacher_label(result.teacher)} (`{result.teacher}`) | {_format_interval(success, percent=True)} "
             f"| {per_seed} | {' | '.join(_format_median_steps(each) for each in steps)} "
             f"| {_format_interval(returns)} |"
         )
@@ -281,7 +291,7 @@ def results_markdown(
         book = book_returns.get(result.teacher)
         per_seed = ", ".join(f"{value:.2f}" for value in result.seed_returns)
         lines.append(
-            f"| {TEACHER_LABELS[result.teacher]} (`{result.teacher}`) | {_format_return(result.returns)} "
+            f"| {teacher_label(result.teacher)} (`{result.teacher}`) | {_format_return(result.returns)} "
             f"| {success.estimate:.0%} [{success.low:.0%}, {success.high:.0%}] | {len(result.runs)} "
             f"| {per_seed} | {'—' if book is None else f'{book:.2f}'} |"
         )
@@ -317,7 +327,7 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
     panels = [figure.add_subplot(grid[1 + index // columns, index % columns]) for index in range(len(results))]
     plotted = False
     for (result, curves), axes in zip(curves_by_teacher, panels, strict=True):
-        label = TEACHER_LABELS[result.teacher]
+        label = teacher_label(result.teacher)
         common_steps = sorted(set.intersection(*(set(curve) for curve in curves)))
         if not common_steps:
             axes.set_title(f"{label}: no evaluations", fontsize="small")

@@ -27,8 +27,8 @@ from tqdm import tqdm
 
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
-from learner.arguments import UsageError
 from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
+from learner.commands.arguments import UsageError
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TrainConfig
 from learner.experiments.run_archive import (

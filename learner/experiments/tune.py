@@ -31,7 +31,7 @@ from pydantic import SecretStr
 
 from common.kuka import ENV_IDS
 from learner import session
-from learner.arguments import UsageError, add_override_flags, positive_int, run_command
+from learner.commands.arguments import UsageError, add_override_flags, positive_int, run_command
 from learner.core.config import TEACHERS, TrainConfig
 from learner.experiments.tune_settings import (
     ASHA_REDUCTION,

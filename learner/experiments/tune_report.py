@@ -19,7 +19,7 @@ from typing import Any
 
 from ray.tune import Callback
 
-from learner.config_file import NOTES_KEY
+from learner.commands.config_file import NOTES_KEY
 from learner.experiments.run_archive import metrics_records
 from learner.experiments.tune_settings import EXPERIMENT, METRICS, RUNS_DIR, TuneSettings
 from learner.experiments.tune_space import SearchSpace, grouped_settings, python_value
@@ -149,7 +149,7 @@ def _json_value(value: Any) -> Any:
 
 
 def best_settings(entry: dict[str, Any], settings: TuneSettings, metric_value: float) -> dict[str, Any]:
-    """The trial's settings as a settings file (``learner.config_file``): the fixed ones, its draws on top."""
+    """The trial's settings as a settings file (``learner.commands.config_file``): the fixed ones, its draws on top."""
     chosen: dict[str, Any] = {
         "teacher": settings.teacher,
         "env": settings.env,

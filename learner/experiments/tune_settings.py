@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from learner.config_file import ConfigFile
+from learner.commands.config_file import ConfigFile
 from learner.core.config import TrainConfig
 from learner.experiments.tune_space import SearchSpace, parse_search_space
 

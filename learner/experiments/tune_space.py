@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from learner.config_file import ConfigFile
+from learner.commands.config_file import ConfigFile
 from learner.core.config import PPOConfig, TrainConfig
 
 Target = Literal["ppo", "teacher", "env"]

@@ -4,7 +4,7 @@ import argparse
 
 import pytest
 
-from learner.arguments import add_teacher_flags
+from learner.commands.arguments import add_teacher_flags
 from teacher_service.teachers import TEACHER_KINDS
 
 

@@ -11,7 +11,7 @@ from tiny_checkpoint import save_untrained_checkpoint
 
 from common.kuka.env import KukaGraspEnv
 from kuka_curriculum import main
-from learner.render import FAILURE_COLOUR, SUCCESS_COLOUR, label_frame
+from learner.commands.render import FAILURE_COLOUR, SUCCESS_COLOUR, label_frame
 
 HAS_FFMPEG = importlib.util.find_spec("imageio_ffmpeg") is not None
 

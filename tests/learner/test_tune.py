@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from kuka_curriculum import main
-from learner.config_file import read_config_file
+from learner.commands.config_file import read_config_file
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.experiments.run_archive import metrics_records, resume_files, write_up_files
 from learner.experiments.tune_space import SearchSpaceError, parse_search_space

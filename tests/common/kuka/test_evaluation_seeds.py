@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.kuka import ENV_ID, HARD_V1_ENV_ID
-from common.kuka.diagnostics import EpisodeDiagnostics, beyond_clamp
 from common.families import family_for
 from common.families.base import HELD_OUT_FIRST_SEED
+from common.kuka import ENV_ID, HARD_V1_ENV_ID
+from common.kuka.diagnostics import EpisodeDiagnostics, beyond_clamp
 from common.kuka.evaluation_seeds import (
     CANDIDATES_PER_EPISODE,
     EVALUATION_SEED_OFFSET,

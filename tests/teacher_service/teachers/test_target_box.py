@@ -14,7 +14,7 @@ import pytest
 from common.client.schemas import CurriculumSpec, ParameterSpec
 from common.client.task_space import Parameter, TaskSpace
 from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
-from learner.arguments import setting
+from learner.commands.arguments import setting
 from teacher_service.curriculum_spec import stored_spec
 from teacher_service.teachers import EpisodeResult, Teacher, make_teacher
 from teacher_service.teachers.algorithms.currot import TargetBox

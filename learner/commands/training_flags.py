@@ -8,7 +8,7 @@ import argparse
 from common.client.task_space import MAX_LEVELS
 from common.families import family_for
 from common.kuka import ENV_IDS
-from learner.arguments import positive_int
+from learner.commands.arguments import positive_int
 from learner.core.config import LISTED_ENV_IDS, LOOPS, TrainConfig
 
 DEFAULTS = TrainConfig()

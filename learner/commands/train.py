@@ -18,7 +18,7 @@ from typing import Any
 
 from pydantic import SecretStr
 
-from learner.arguments import (
+from learner.commands.arguments import (
     UsageError,
     add_override_flags,
     non_negative_int,
@@ -26,7 +26,8 @@ from learner.arguments import (
     run_command,
     unit_fraction,
 )
-from learner.config_file import read_config_file
+from learner.commands.config_file import read_config_file
+from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
 from learner.session import (
     PUBLIC_URL_VARIABLE,
@@ -37,7 +38,6 @@ from learner.session import (
     register_curriculum,
     token_from_environment,
 )
-from learner.training_flags import add_training_flags
 
 DEFAULTS = TrainConfig()
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)

@@ -16,8 +16,8 @@ from common.kuka.bullet import native_output_silenced
 from common.kuka.env import TIME_STEP, make_kuka_env
 from common.kuka.manual_control import ManualControl, Mode, Report, SliderPanel, describe, drive
 from common.kuka.task_space import task_space_for
-from learner.arguments import UsageError, positive_int, run_command
-from learner.checkpoint_arguments import parse_task
+from learner.commands.arguments import UsageError, positive_int, run_command
+from learner.commands.checkpoint_arguments import parse_task
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

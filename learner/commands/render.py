@@ -25,8 +25,8 @@ from common.families import family_for
 from common.kuka import ENV_ID
 from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
-from learner.arguments import UsageError, positive_int, run_command
-from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
+from learner.commands.arguments import UsageError, positive_int, run_command
+from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
 from learner.core.policy import policy_snapshot
 
 FRAMES_PER_SECOND = 30.0

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.arguments import UsageError
+from learner.commands.arguments import UsageError
 from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
 
 TASK_HELP = (

@@ -16,8 +16,6 @@ from pathlib import Path
 
 from common.kuka import ENV_IDS, HARD_V1_ENV_ID
 from common.kuka.task_space import task_space_for
-from learner.arguments import UsageError, positive_int, run_command
-from learner.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
 from learner.checkpoint_evaluation import (
     EvaluationResult,
     available_cpus,
@@ -25,6 +23,8 @@ from learner.checkpoint_evaluation import (
     evaluate_policy,
     scripted_record,
 )
+from learner.commands.arguments import UsageError, positive_int, run_command
+from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
 from learner.episode_diagnostics import success_by_band
 from learner.json_file import write_json
 
