@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
+from common.client.schemas import TEACHER_LABELS
 from common.client.task_space import MAX_LEVELS, Task, TaskSpace
 from common.families import TaskFamily, family_for, listed_env_ids
 from common.families.base import EVALUATION_SEED_SCHEMES, EvaluationSeeds
@@ -18,7 +19,6 @@ from common.families.kuka import EDGE_PLACEMENT_SHARE
 from common.kuka import ENV_ID
 from common.levels import DEFAULT_LEVELS
 from common.policy.noise import LOG_STD_BOUNDS
-from teacher_service.teachers import TEACHER_KINDS
 
 if TYPE_CHECKING:
     from common.client.schemas import TeacherKind
@@ -129,8 +129,9 @@ class PPOConfig:
 _OPTIONAL_FLOATS = ("target_kl", "min_log_std")
 """``PPOConfig`` fields that take a number or None."""
 
-TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_KINDS)
-"""Every teacher kind the service knows, in its registry's order (``teacher_service.teachers``)."""
+TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_LABELS)
+"""Every teacher kind the service ships, as the client's schemas list them (``GET /api/v1/teachers`` says the
+same of a running service; a test holds the two equal)."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 LISTED_ENV_IDS: tuple[str, ...] = listed_env_ids()
 """The ids ``train --env`` lists: the KUKA families, then the MiniGrid level families; it also takes any
