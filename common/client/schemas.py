@@ -7,6 +7,8 @@ Rewards and bounds must be finite: JSON parsers accept ``NaN`` and ``Infinity``,
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -19,6 +21,26 @@ API_PREFIX = "/api/v1"
 TeacherKind = Annotated[str, Field(min_length=1, max_length=32, pattern=r"^[a-z][a-z0-9-]*$")]
 """A teacher kind's name, such as ``alp-gmm``. The service knows its kinds (``GET /api/v1/teachers``
 lists them, an unknown one is a 422), so this client needs no change when the service gains one."""
+
+TEACHER_LABELS: Mapping[str, str] = MappingProxyType(
+    {
+        "alp-gmm": "ALP-GMM",
+        "manual": "Manual lesson plan",
+        "random": "Uniform random tasks",
+        "fixed": "No curriculum: hardest task only",
+        "adr": "ADR",
+        "self-paced": "Self-paced (SPDL)",
+        "currot": "CURROT",
+        "covar-gmm": "Covar-GMM",
+        "riac": "RIAC",
+        "learnability": "Learnability (SFL)",
+        "plr": "Prioritized level replay (PLR)",
+        "learning-progress": "Learning progress",
+    }
+)
+"""Each teacher kind the service ships, in its registry's order, with the name reports and plots give it: the
+one list of kinds and labels the learner reads, without importing the service (a test holds it to the
+service's registry)."""
 
 CURRICULUM_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_TASKS_PER_REQUEST = 1024
