@@ -36,8 +36,8 @@ from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.core.config import PPOConfig, TrainConfig
 from learner.core.trainer import IterationReport, Trainer
-from learner.session import curriculum_name
-from learner.teacher_process import local_teacher_service
+from learner.job.session import curriculum_name
+from learner.job.teacher_process import local_teacher_service
 
 TEACHER = "fixed"
 MEASURED_STEPS_PER_ENV = 5120

@@ -8,7 +8,7 @@ prints, per family and policy, both sides' success counts and every episode whos
 length differ, and exits 1 if any success flag does.
 
 Policies: ``zero`` (no action), ``random`` (uniform, seeded per episode), ``scripted`` (the hand-made
-controller of ``learner/experiments/task_hardness.py``) and ``checkpoint`` (the deterministic policy of
+controller of ``bench/task_hardness.py``) and ``checkpoint`` (the deterministic policy of
 ``--checkpoint``).
 
     .venv/bin/python bench/episode_equivalence.py --episodes 1000 --processes 2
@@ -45,8 +45,8 @@ Episode = tuple[bool, float, int]
 def play_chunk(env_id: str, policy: str, checkpoint: str, seeds: list[int]) -> list[Episode]:
     """Episodes of one policy on the family's hardest task, with whichever ``common`` this process imports."""
     sys.path.append(str(ROOT))  # last, so that a baseline's ``common`` on PYTHONPATH comes first
+    from bench.task_hardness import episode_policy
     from common.kuka.env import make_kuka_env
-    from learner.experiments.task_hardness import episode_policy
 
     env = make_kuka_env(env_id)
     network = None

@@ -6,7 +6,7 @@ same levels, budget and PPO settings; only where each episode's level comes from
 - ours, through a ``serve`` this script starts: ``plr``, robust PLR (``plr`` with ``robust: true``),
   ``learning-progress``, ``learnability``, and ``random`` (uniform over the training levels);
 - Syllabus's PLR and learning progress, in a Ray actor the workers draw from
-  (``learner.experiments.level_sources``);
+  (``bench.level_sources``);
 - ``no-curriculum``: uniform levels drawn inside each worker, no service at all, the throughput baseline.
 
 After training, each final policy plays ``--test-levels`` held-out levels (seeds from 1,000,000, outside
@@ -117,10 +117,10 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
     """Train (or resume) one run; returns its final checkpoint."""
     import ray
 
+    from bench.level_sources import SyllabusCurriculum, SyllabusLevels, UniformLevels
     from learner.core.checkpoint import latest_checkpoint, load_checkpoint
     from learner.core.trainer import Trainer
-    from learner.experiments.level_sources import SyllabusCurriculum, SyllabusLevels, UniformLevels
-    from learner.session import register_curriculum
+    from learner.job.session import register_curriculum
 
     config = run_config(args, kind, seed)
     previous = latest_checkpoint(run_dir)
@@ -153,9 +153,9 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
 
 def test_one(args: argparse.Namespace, final: Path) -> dict[str, Any]:
     """The final policy on held-out levels, each played ``test_repeats`` times."""
+    from bench.level_sources import UniformLevels
     from learner.core.checkpoint import load_checkpoint
     from learner.core.policy import policy_snapshot
-    from learner.experiments.level_sources import UniformLevels
     from rollout_worker.actor import WorkerSettings
     from rollout_worker.pool import WorkerPool
 
@@ -200,8 +200,8 @@ def measure_throughput(args: argparse.Namespace) -> None:
     import shutil
 
     from learner.experiments.run_archive import metrics_records
-    from learner.session import connect_ray
-    from learner.teacher_process import launch_local_teacher_service
+    from learner.job.session import connect_ray
+    from learner.job.teacher_process import launch_local_teacher_service
 
     out = Path(args.out) / "throughput"
     shutil.rmtree(out, ignore_errors=True)
@@ -237,8 +237,8 @@ def measure_throughput(args: argparse.Namespace) -> None:
 
 def run_all(args: argparse.Namespace) -> None:
     from learner.experiments.run_archive import archive_run
-    from learner.session import connect_ray
-    from learner.teacher_process import launch_local_teacher_service
+    from learner.job.session import connect_ray
+    from learner.job.teacher_process import launch_local_teacher_service
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -269,8 +269,8 @@ def run_all(args: argparse.Namespace) -> None:
 
 
 def summarise(args: argparse.Namespace) -> None:
+    from learner.evaluation.stats import mean_interval
     from learner.experiments.run_archive import metrics_records
-    from learner.stats import mean_interval
 
     out = Path(args.out)
     rows: dict[str, Any] = {}

@@ -48,7 +48,7 @@ from common.kuka import ENV_IDS
 from common.kuka.env import KukaGraspEnv
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.core.config import LOOPS, TrainConfig
-from learner.teacher_process import DATABASE_FILE
+from learner.job.teacher_process import DATABASE_FILE
 from teacher_service.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -44,7 +44,7 @@ def test_a_new_local_ray_cluster_keeps_token_authentication_without_the_warning(
     """Ray turns tokens on for a new local cluster and warns that it chose so; the learner chooses the same."""
     result = python(
         "import contextlib, os\n"
-        "from learner.session import connect_ray\n"
+        "from learner.job.session import connect_ray\n"
         "with contextlib.ExitStack() as stack:\n"
         "    connect_ray(None, 1, stack)\n"
         "    print(os.environ['RAY_AUTH_MODE'])\n",

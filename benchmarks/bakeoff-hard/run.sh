@@ -43,7 +43,7 @@ if [ "${1:-}" = diagnostics ]; then
             [ -f "$evaluation" ] && finished+=("$(dirname "$evaluation")")
         done
         [ ${#finished[@]} -gt 0 ] || continue
-        "$PYTHON" learner/experiments/curriculum_diagnostics.py --out "$DIAGNOSTICS/$teacher" "${finished[@]}"
+        "$PYTHON" bench/curriculum_diagnostics.py --out "$DIAGNOSTICS/$teacher" "${finished[@]}"
     done
     exit 0
 fi

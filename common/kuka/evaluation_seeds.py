@@ -34,7 +34,7 @@ MAX_STRATIFIED_EPISODES = (FINAL_EVALUATION_SEED - EVALUATION_SEED_OFFSET) // CA
 
 def clockwise(block_yaw: float) -> bool:
     """Whether a block lies turned clockwise (seen from above): its yaw modulo a half turn, in [-pi/2, pi/2),
-    below 0, as ``learner.experiments.success_by_turn`` counts it."""
+    below 0, as ``bench.success_by_turn`` counts it."""
     return (block_yaw + math.pi / 2) % math.pi - math.pi / 2 < 0
 
 

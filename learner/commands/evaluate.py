@@ -16,17 +16,17 @@ from pathlib import Path
 
 from common.kuka import ENV_IDS, HARD_V1_ENV_ID
 from common.kuka.task_space import task_space_for
-from learner.checkpoint_evaluation import (
+from learner.commands.arguments import UsageError, positive_int, run_command
+from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
+from learner.core.json_file import write_json
+from learner.evaluation.checkpoint_evaluation import (
     EvaluationResult,
     available_cpus,
     evaluate_checkpoint,
     evaluate_policy,
     scripted_record,
 )
-from learner.commands.arguments import UsageError, positive_int, run_command
-from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
-from learner.episode_diagnostics import success_by_band
-from learner.json_file import write_json
+from learner.evaluation.episode_diagnostics import success_by_band
 
 DEFAULT_MAX_STEPS = 1000
 """The scripted controller's episode limit when no checkpoint gives one: the environments' default."""

@@ -29,7 +29,7 @@ from learner.commands.arguments import (
 from learner.commands.config_file import read_config_file
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
-from learner.session import (
+from learner.job.session import (
     PUBLIC_URL_VARIABLE,
     check_ray_reachable,
     connect_ray,
@@ -191,7 +191,7 @@ def _run_training(
     from tqdm import tqdm
 
     from learner.core.trainer import IterationReport, Trainer
-    from learner.teacher_status import TeacherStatus
+    from learner.job.teacher_status import TeacherStatus
 
     trainer = Trainer(
         config, run_dir, teacher_url, name, teacher_token=token, resume_from=checkpoint, actor_name_prefix=name

@@ -27,10 +27,11 @@ from tqdm import tqdm
 
 from common.kuka import ENV_ID
 from common.kuka.task_space import task_space_for
-from learner.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.commands.arguments import UsageError
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TrainConfig
+from learner.core.json_file import write_json
+from learner.evaluation.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.experiments.run_archive import (
     EVALUATION_FILE,
     TRAIN_LOG,
@@ -40,7 +41,6 @@ from learner.experiments.run_archive import (
     read_json,
     restore_run,
 )
-from learner.json_file import write_json
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"

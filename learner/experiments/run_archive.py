@@ -80,7 +80,7 @@ def _raw_files() -> tuple[str, ...]:
     client loaded up front a Ctrl-C during its final evaluation no longer stopped it (the
     Ctrl-C test in tests/learner/test_bakeoff.py hung).
     """
-    from learner.teacher_process import DATABASE_FILE, LOG_FILE
+    from learner.job.teacher_process import DATABASE_FILE, LOG_FILE
 
     return DATABASE_FILE, METRICS_FILE, TRAIN_LOG, LOG_FILE
 

@@ -30,9 +30,9 @@ from typing import Any
 from pydantic import SecretStr
 
 from common.kuka import ENV_IDS
-from learner import session
 from learner.commands.arguments import UsageError, add_override_flags, positive_int, run_command
 from learner.core.config import TEACHERS, TrainConfig
+from learner.core.json_file import write_json
 from learner.experiments.tune_settings import (
     ASHA_REDUCTION,
     DEFAULTS,
@@ -45,7 +45,7 @@ from learner.experiments.tune_settings import (
     TuneSettings,
 )
 from learner.experiments.tune_space import SearchSpace, SearchSpaceError, apply_settings
-from learner.json_file import write_json
+from learner.job import session
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

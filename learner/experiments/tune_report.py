@@ -20,10 +20,10 @@ from typing import Any
 from ray.tune import Callback
 
 from learner.commands.config_file import NOTES_KEY
+from learner.core.json_file import write_json
 from learner.experiments.run_archive import metrics_records
 from learner.experiments.tune_settings import EXPERIMENT, METRICS, RUNS_DIR, TuneSettings
 from learner.experiments.tune_space import SearchSpace, grouped_settings, python_value
-from learner.json_file import write_json
 
 TRIALS_FILE = "trials.json"
 BEST_FILE = "best.json"

@@ -17,18 +17,18 @@ from common.kuka.scripted import scripted_action
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.actor_critic import InferencePolicy
 from kuka_curriculum import main
-from learner.checkpoint_evaluation import (
+from learner.commands.checkpoint_arguments import parse_task
+from learner.core.checkpoint import load_checkpoint
+from learner.core.policy import policy_snapshot
+from learner.evaluation.checkpoint_evaluation import (
     EvaluationResult,
     describe_task,
     evaluate_policy,
     scripted_evaluation,
     significant,
 )
-from learner.commands.checkpoint_arguments import parse_task
-from learner.core.checkpoint import load_checkpoint
-from learner.core.policy import policy_snapshot
-from learner.episode_diagnostics import success_by_band
-from learner.stats import mean_interval, wilson_interval
+from learner.evaluation.episode_diagnostics import success_by_band
+from learner.evaluation.stats import mean_interval, wilson_interval
 from rollout_worker.sampler import run_episodes
 
 

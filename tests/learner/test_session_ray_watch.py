@@ -1,4 +1,4 @@
-"""The learner's watch on a joined Ray cluster (``learner.session.watch_ray_cluster``): a job whose
+"""The learner's watch on a joined Ray cluster (``learner.job.session.watch_ray_cluster``): a job whose
 cluster was replaced under it (a Ray head restarted) exits with 75 for its supervisor to restart it,
 where it used to wait for ever on actors the new head does not know (found by bench/chaos.py)."""
 
@@ -18,7 +18,7 @@ def _watched(nodes: str, stop_first: bool = False) -> subprocess.CompletedProces
     """A process watching with ``nodes`` as the cluster's answer, which then sleeps 3 s and exits 0."""
     program = textwrap.dedent(f"""
         import time
-        from learner.session import watch_ray_cluster
+        from learner.job.session import watch_ray_cluster
 
         def nodes():
             {nodes}

@@ -15,8 +15,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from common.client.schemas import API_PREFIX
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
-from learner.session import curriculum_name
-from learner.teacher_process import local_teacher_service
+from learner.job.session import curriculum_name
+from learner.job.teacher_process import local_teacher_service
 from teacher_service.process import free_port
 
 SMALL_RUN = [

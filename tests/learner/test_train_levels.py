@@ -17,8 +17,8 @@ from test_train_e2e import metrics
 from common.client.teacher_client import TeacherClient
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.policy import policy_snapshot
-from learner.session import curriculum_name
-from learner.teacher_process import local_teacher_service
+from learner.job.session import curriculum_name
+from learner.job.teacher_process import local_teacher_service
 
 ENV_ID = "MiniGrid-DoorKey-5x5-v0"
 LEVELS = 50

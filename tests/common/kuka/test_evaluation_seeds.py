@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.success_by_turn import turn_sense
 from common.families import family_for
 from common.families.base import HELD_OUT_FIRST_SEED
 from common.kuka import ENV_ID, HARD_V1_ENV_ID
@@ -22,8 +23,7 @@ from common.kuka.evaluation_seeds import (
 )
 from common.levels import DEFAULT_LEVELS, LEVEL_ENV_IDS
 from learner.core.config import TrainConfig
-from learner.episode_diagnostics import BAND_LABELS, band_of
-from learner.experiments.success_by_turn import turn_sense
+from learner.evaluation.episode_diagnostics import BAND_LABELS, band_of
 
 FINAL_EPISODES = 500
 """The coming bake-off's final evaluation: 500 episodes from seed 100,000 (issue 59)."""

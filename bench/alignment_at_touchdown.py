@@ -4,10 +4,10 @@ given ``align_margin`` would count. It is the measurement behind ``KukaGraspHard
 Each policy plays the family's hardest point with ``align_margin`` 90, so every lift counts and the
 episode's last ``info`` gives the fingers' angle from square at touchdown; the margin does not enter the
 observation, so a policy plays exactly as it would under any margin. A policy is one of
-``learner/experiments/task_hardness.py``'s fixed ones (``zero``, ``random``, ``drift``, ``scripted``) or a checkpoint
+``bench/task_hardness.py``'s fixed ones (``zero``, ``random``, ``drift``, ``scripted``) or a checkpoint
 (a ``.pt`` file or a run directory: its latest checkpoint, played deterministically, as ``evaluate`` does).
 
-    .venv/bin/python -m learner.experiments.alignment_at_touchdown drift scripted \\
+    .venv/bin/python bench/alignment_at_touchdown.py drift scripted \\
         benchmarks/bakeoff-hard/bakeoff/runs/currot-seed0 --episodes 1000 --seed 30000 --processes 2
 
 Prints, per policy, the lifts and how many of them each margin counts (Wilson 95% intervals over the
@@ -21,23 +21,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from common.client.task_space import Task
-from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.diagnostics import play_episode
-from common.kuka.env import make_kuka_env
-from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for
-from common.policy.actor_critic import InferencePolicy
-from learner.commands.checkpoint_arguments import read_checkpoint
-from learner.core.policy import policy_snapshot
-from learner.experiments.task_hardness import CHUNK, POLICIES, Policy, episode_policy
-from learner.process_pool import StoppablePool
-from learner.stats import wilson_interval
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from bench.task_hardness import CHUNK, POLICIES, Policy, episode_policy  # noqa: E402
+from common.client.task_space import Task  # noqa: E402
+from common.kuka import HARD_ENV_ID, HARD_V1_ENV_ID  # noqa: E402
+from common.kuka.diagnostics import play_episode  # noqa: E402
+from common.kuka.env import make_kuka_env  # noqa: E402
+from common.kuka.task_space import ALIGN_MARGIN_ANY, task_space_for  # noqa: E402
+from common.policy.actor_critic import InferencePolicy  # noqa: E402
+from learner.commands.checkpoint_arguments import read_checkpoint  # noqa: E402
+from learner.core.policy import policy_snapshot  # noqa: E402
+from learner.evaluation.process_pool import StoppablePool  # noqa: E402
+from learner.evaluation.stats import wilson_interval  # noqa: E402
 
 MARGINS = (8.0, 5.0, 3.0, 2.0, 1.0)
 """Margins (degrees) to count the lifts under: v0's hardest 8, v1's 2, and around them."""

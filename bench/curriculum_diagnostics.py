@@ -25,13 +25,14 @@ must share it. Writes plots and a markdown summary:
   ``KukaGraspHard-v0`` ``obj_far`` moves the block toward a point drawn after those uniforms, so
   they no longer say where it lies, and the section is left out.
 
-    .venv/bin/python -m learner.experiments.curriculum_diagnostics runs/bakeoff/runs/* --out benchmarks/diagnostics
+    .venv/bin/python bench/curriculum_diagnostics.py runs/bakeoff/runs/* --out benchmarks/diagnostics
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -41,14 +42,15 @@ import numpy as np
 from gymnasium.utils.seeding import np_random
 from matplotlib.figure import Figure
 
-from common.client.task_space import TaskSpace
-from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.core.config import TrainConfig
-from learner.experiments.bakeoff_runs import RUNS_DIR
-from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, read_json, unpacked
-from learner.teacher_process import DATABASE_FILE
-from teacher_service.curriculum_spec import stored_spec
-from teacher_service.store import Store
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.client.task_space import TaskSpace  # noqa: E402
+from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
+from learner.core.config import TrainConfig  # noqa: E402
+from learner.experiments.bakeoff_runs import RUNS_DIR  # noqa: E402
+from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, read_json, unpacked  # noqa: E402
+from learner.job.teacher_process import DATABASE_FILE  # noqa: E402
+from teacher_service.curriculum_spec import stored_spec  # noqa: E402
+from teacher_service.store import Store  # noqa: E402
 
 BAND_LABELS = ("easiest quarter", "second", "third", "hardest quarter")
 WINDOWS = 10

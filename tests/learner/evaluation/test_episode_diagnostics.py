@@ -7,7 +7,7 @@ import pytest
 
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.episode_diagnostics import (
+from learner.evaluation.episode_diagnostics import (
     ALL_LABELS,
     BAND_LABELS,
     STRAIGHT_AHEAD_LABEL,
@@ -17,7 +17,7 @@ from learner.episode_diagnostics import (
     plot_bands,
     success_by_band,
 )
-from learner.stats import wilson_interval
+from learner.evaluation.stats import wilson_interval
 
 LOW, HIGH = TARGET_X_RANGE
 

@@ -8,7 +8,7 @@ must have played the same episode seeds, so each row is read on the same placeme
     for k in 0 1 2 3 4; do .venv/bin/kuka-curriculum evaluate benchmarks/bakeoff-hard/bakeoff-v1/runs/currot-seed$k \\
         --episodes 100 --seed 100000 --json /tmp/currot-seed$k.json; done
     .venv/bin/kuka-curriculum evaluate --scripted --episodes 100 --seed 100000 --json /tmp/scripted.json
-    .venv/bin/python -m learner.experiments.placement_bands /tmp/currot-seed*.json /tmp/scripted.json \\
+    .venv/bin/python bench/placement_bands.py /tmp/currot-seed*.json /tmp/scripted.json \\
         --plot /tmp/bands.png
 
 A bake-off's own ``runs/<teacher>-seed<k>/evaluation.json.xz`` (read as it is: xz-compressed files are
@@ -21,15 +21,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
-from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.checkpoint_evaluation import pooled_episodes
-from learner.episode_diagnostics import band_table, plot_bands
-from learner.experiments.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record
-from learner.experiments.bakeoff_runs import Run
-from learner.experiments.run_archive import read_json
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.kuka.diagnostics import EpisodeDiagnostics  # noqa: E402
+from learner.evaluation.checkpoint_evaluation import pooled_episodes  # noqa: E402
+from learner.evaluation.episode_diagnostics import band_table, plot_bands  # noqa: E402
+from learner.experiments.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record  # noqa: E402
+from learner.experiments.bakeoff_runs import Run  # noqa: E402
+from learner.experiments.run_archive import read_json  # noqa: E402
 
 Rows = dict[str, list[list[tuple[EpisodeDiagnostics, bool]]]]
 """Per row label, each file's diagnosed episodes."""

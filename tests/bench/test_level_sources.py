@@ -8,10 +8,10 @@ import pytest
 import ray
 import torch
 
+from bench.level_sources import BLOCK, SyllabusCurriculum, SyllabusLevels, UniformLevels
 from common.policy.actor_critic import ActorCritic, PolicySpec, capture_snapshot
 from common.policy.normalizer import RunningNormalizer
 from common.policy.trajectory import EpisodeStats
-from learner.experiments.level_sources import BLOCK, SyllabusCurriculum, SyllabusLevels, UniformLevels
 from rollout_worker.actor import RolloutWorker, WorkerSettings
 
 LEVELS = 12

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from learner.process_pool import StoppablePool
+from learner.evaluation.process_pool import StoppablePool
 
 PARENT = """
 import os, time
 from multiprocessing import get_context
-from learner.process_pool import StoppablePool
+from learner.evaluation.process_pool import StoppablePool
 
 def pid_then_wait(_: int) -> int:
     time.sleep(0.2)

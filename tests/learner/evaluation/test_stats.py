@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from learner.stats import mean_interval, wilson_interval
+from learner.evaluation.stats import mean_interval, wilson_interval
 
 
 @pytest.mark.parametrize(

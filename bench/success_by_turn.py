@@ -1,5 +1,5 @@
 """Success by how the block lies turned and how near the arm, from ``evaluate --json`` files: where a
-policy misses that the placement bands (``learner/experiments/placement_bands.py``, by distance beyond the clamp) do not
+policy misses that the placement bands (``bench/placement_bands.py``, by distance beyond the clamp) do not
 separate.
 
 A block looks the same turned half a turn, so its yaw is read modulo a half turn, in [-90, 90) degrees:
@@ -9,7 +9,7 @@ file is one column (its run directory's name, or the file's): success (episodes)
 from the gripper's axis to the block at touchdown, and where the file recorded it, the median turn of the
 wrist at touchdown (signed as the yaw actions add up).
 
-    .venv/bin/python -m learner.experiments.success_by_turn \\
+    .venv/bin/python bench/success_by_turn.py \\
         benchmarks/bakeoff-hard/*/runs/currot-seed0/evaluation.json.xz /tmp/scripted.json
 """
 
@@ -17,14 +17,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.checkpoint_evaluation import pooled_episodes
-from learner.experiments.run_archive import EVALUATION_FILE, SUFFIX, read_json
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.kuka.diagnostics import EpisodeDiagnostics  # noqa: E402
+from learner.evaluation.checkpoint_evaluation import pooled_episodes  # noqa: E402
+from learner.experiments.run_archive import EVALUATION_FILE, SUFFIX, read_json  # noqa: E402
 
 X_BANDS = ((-math.inf, 0.5), (0.5, 0.6), (0.6, 0.65), (0.65, math.inf))
 """Block x (metres) bands: below the IK target's x range, its near half, its far half, and beyond it."""

@@ -1,4 +1,4 @@
-"""``learner/experiments/placement_bands.py`` pools ``evaluate --json`` files into the bake-off's placement
+"""``bench/placement_bands.py`` pools ``evaluate --json`` files into the bake-off's placement
 table: one row per teacher over its files, the scripted controller's deterministic episodes counted once, and files of
 other episode seeds refused."""
 
@@ -10,12 +10,12 @@ import sys
 
 import pytest
 
+from bench.placement_bands import main
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
-from learner.checkpoint_evaluation import EvaluationResult
-from learner.experiments.placement_bands import main
+from learner.evaluation.checkpoint_evaluation import EvaluationResult
 
 TASK = KUKA_HARD_V1_TASK_SPACE.hardest()
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.stats import CONFIDENCE, Interval, wilson_interval
+from learner.evaluation.stats import CONFIDENCE, Interval, wilson_interval
 
 BAND_EDGES = (0.0, 0.02, 0.04)
 """Distances (metres) beyond the clamp that split the bands; the last band is open above."""

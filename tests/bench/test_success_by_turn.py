@@ -1,4 +1,4 @@
-"""``learner/experiments/success_by_turn.py`` splits ``evaluate --json`` files by the block's turn (modulo a
+"""``bench/success_by_turn.py`` splits ``evaluate --json`` files by the block's turn (modulo a
 half turn) and x band: one column per file, the scripted controller's file named as such,
 files of other seeds refused."""
 
@@ -10,12 +10,12 @@ import math
 
 import pytest
 
+from bench.success_by_turn import main, turn_sense
 from common.kuka import HARD_V1_ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
-from learner.checkpoint_evaluation import EvaluationResult
-from learner.experiments.success_by_turn import main, turn_sense
+from learner.evaluation.checkpoint_evaluation import EvaluationResult
 
 TASK = KUKA_HARD_V1_TASK_SPACE.hardest()
 

@@ -33,11 +33,11 @@ from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from common.policy.trajectory import EpisodeStats
 from learner.core.checkpoint import Checkpoint
+from learner.core.json_file import write_json
 from learner.core.policy import policy_snapshot
-from learner.episode_diagnostics import success_by_band
-from learner.json_file import write_json
-from learner.process_pool import StoppablePool
-from learner.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
+from learner.evaluation.episode_diagnostics import success_by_band
+from learner.evaluation.process_pool import StoppablePool
+from learner.evaluation.stats import CONFIDENCE, Interval, mean_interval, wilson_interval
 
 
 def describe_task(task: Task, space: TaskSpace = KUKA_TASK_SPACE) -> str:

@@ -1,4 +1,4 @@
-"""``learner/experiments/curriculum_diagnostics.py`` reads each run's task space from its own teacher database: tiny
+"""``bench/curriculum_diagnostics.py`` reads each run's task space from its own teacher database: tiny
 runs of the book's space and of the hard family's, written the way the service and ``train`` write them."""
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.curriculum_diagnostics import PLACEMENT_SKIPPED, load_run, main, summary_markdown
 from common.client.schemas import ParameterSpec
 from common.client.task_space import TaskSpace
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_TASK_SPACE
 from learner.core.metrics import METRICS_FILE
-from learner.experiments.curriculum_diagnostics import PLACEMENT_SKIPPED, load_run, main, summary_markdown
 from learner.experiments.run_archive import EVALUATION_FILE, archive_run
-from learner.teacher_process import DATABASE_FILE
+from learner.job.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import SPEC_CLASSES
 from teacher_service.store import NewResult, NewTask, Store, StoredCurriculum
 

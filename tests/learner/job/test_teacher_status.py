@@ -10,7 +10,7 @@ import pytest
 
 from common.client.teacher_client import TeacherClient
 from common.kuka.task_space import KUKA_TASK_SPACE
-from learner.teacher_status import TeacherStatus
+from learner.job.teacher_status import TeacherStatus
 from teacher_service.process import ServiceProcess, free_port
 
 INTERVAL_S = 0.1

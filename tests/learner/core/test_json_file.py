@@ -1,7 +1,7 @@
 import json
 import math
 
-from learner.json_file import dumps, write_json
+from learner.core.json_file import dumps, write_json
 
 
 def test_lists_of_numbers_take_one_line_and_everything_reads_back_unchanged(tmp_path):

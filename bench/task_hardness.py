@@ -11,7 +11,7 @@ of the family, from the easiest to the hardest:
 - ``scripted``: a hand-made controller that reads only the observation, moves the gripper over the
   block and turns the wrist across it: it shows the point can be solved, not how well PPO can.
 
-    .venv/bin/python -m learner.experiments.task_hardness --env KukaGraspHard-v0 --episodes 1000 --processes 2
+    .venv/bin/python bench/task_hardness.py --env KukaGraspHard-v0 --episodes 1000 --processes 2
 
 Prints, per point and policy, the success rate (Wilson 95% interval), the mean return and the mean
 episode length; ``--json`` also writes them.
@@ -22,19 +22,21 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from common.client.task_space import Task
-from common.kuka import ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID
-from common.kuka.env import KukaGraspEnv, make_kuka_env
-from common.kuka.scripted import scripted_action
-from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for
-from learner.process_pool import StoppablePool
-from learner.stats import wilson_interval
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.client.task_space import Task  # noqa: E402
+from common.kuka import ENV_IDS, HARD_ENV_ID, HARD_V1_ENV_ID  # noqa: E402
+from common.kuka.env import KukaGraspEnv, make_kuka_env  # noqa: E402
+from common.kuka.scripted import scripted_action  # noqa: E402
+from common.kuka.task_space import KUKA_HARD_BOOK_HARDEST, MOVE_SCALE_HARDEST, task_space_for  # noqa: E402
+from learner.evaluation.process_pool import StoppablePool  # noqa: E402
+from learner.evaluation.stats import wilson_interval  # noqa: E402
 
 POLICIES = ("zero", "random", "drift", "scripted")
 CHUNK = 50

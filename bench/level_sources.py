@@ -25,16 +25,19 @@ Two more things are Syllabus's as released, and are worked around here in the op
 from __future__ import annotations
 
 import itertools
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import ray
 
-from common.client.teacher_client import Assignment
-from common.policy.trajectory import EpisodeStats
-from rollout_worker.sampler import TaskSource
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.client.teacher_client import Assignment  # noqa: E402
+from common.policy.trajectory import EpisodeStats  # noqa: E402
+from rollout_worker.sampler import TaskSource  # noqa: E402
 
 SYLLABUS_KINDS = ("syllabus-plr", "syllabus-learning-progress")
 """The Syllabus curricula the side-by-side runs (its Learnability needs an evaluator that plays every

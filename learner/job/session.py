@@ -51,7 +51,7 @@ def launch_teacher(url: str | None, run_dir: Path, stack: contextlib.ExitStack) 
     """A wait for the teacher service's URL: a service of its own in ``run_dir``, launched now so the
     caller can start Ray while it starts, or the one at ``url``, checked at once so a wrong address
     fails before Ray starts."""
-    from learner.teacher_process import launch_local_teacher_service
+    from learner.job.teacher_process import launch_local_teacher_service
 
     if url is None:
         ready = launch_local_teacher_service(run_dir, stack)
