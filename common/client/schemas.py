@@ -18,7 +18,8 @@ from common.client.task_space import Parameter, ParameterType, TaskSpace
 
 API_PREFIX = "/api/v1"
 
-TeacherKind = Annotated[str, Field(min_length=1, max_length=32, pattern=r"^[a-z][a-z0-9-]*$")]
+TEACHER_KIND_PATTERN = r"^[a-z][a-z0-9-]{0,31}$"
+TeacherKind = Annotated[str, Field(min_length=1, max_length=32, pattern=TEACHER_KIND_PATTERN)]
 """A teacher kind's name, such as ``alp-gmm``. The service knows its kinds (``GET /api/v1/teachers``
 lists them, an unknown one is a 422), so this client needs no change when the service gains one."""
 

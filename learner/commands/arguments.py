@@ -8,6 +8,8 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+from learner.core.config import TEACHERS
+
 
 class UsageError(Exception):
     """Bad input or an unreachable service: reported in one line, exit code 2 (every command's ``run``)."""
@@ -78,9 +80,9 @@ def add_override_flags(
 def add_teacher_flags(parser: argparse.ArgumentParser) -> None:
     """``--teacher KIND`` (any kind of the service's registry; alp-gmm by default) and repeatable
     ``--teacher-param NAME=VALUE`` (into ``teacher_params``), for the examples' own parsers."""
-    from learner.core.config import TEACHERS  # here: the registry imports every teacher, which --help needs only
-
-    parser.add_argument("--teacher", default="alp-gmm", choices=TEACHERS, help="the curriculum's teacher kind")
+    parser.add_argument(
+        "--teacher", default="alp-gmm", metavar="KIND", help=f"the curriculum's teacher kind: {', '.join(TEACHERS)}"
+    )
     parser.add_argument(
         "--teacher-param",
         dest="teacher_params",

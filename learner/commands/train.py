@@ -52,7 +52,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         help="a settings file, such as the best.json of `kuka-curriculum tune`; flags given override it",
     )
-    run.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
+    run.add_argument(
+        "--teacher",
+        metavar="KIND",
+        help=f"curriculum teacher, a kind of the service: {', '.join(TEACHERS)} (default {DEFAULTS.teacher}); "
+        "`GET /api/v1/teachers` lists a running service's kinds and which task spaces each takes",
+    )
     run.add_argument(
         "--total-steps", type=positive_int, help=f"environment steps to train for (default {DEFAULTS.total_steps:_})"
     )

@@ -7,11 +7,12 @@ them and ``--resume`` can rebuild the run exactly.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from common.client.schemas import TEACHER_LABELS
+from common.client.schemas import TEACHER_KIND_PATTERN, TEACHER_LABELS
 from common.client.task_space import MAX_LEVELS, Task, TaskSpace
 from common.families import TaskFamily, family_for, listed_env_ids
 from common.families.base import EVALUATION_SEED_SCHEMES, EvaluationSeeds
@@ -61,6 +62,8 @@ class PPOConfig:
     """Global gradient-norm clip."""
     normalize_advantages: bool = True
     """Standardise advantages per minibatch."""
+    normalize_values: bool = False
+    """The critic learns returns standardised by their running mean and std (PopArt); GAE gets them unscaled."""
     target_kl: float | None = None
     """Stop the epoch loop early when the approximate KL exceeds this (None = never)."""
     hidden_sizes: tuple[int, ...] = (64, 64)
@@ -77,6 +80,8 @@ class PPOConfig:
     """Also feed the networks the block's offset from the gripper in the world frame, the frame actions move in."""
     half_turn_block_yaw: bool = False
     """Feed the block's yaw as (sin 2a, cos 2a): a block turned half a turn is the same, so the wrist can turn less."""
+    critic_task_inputs: bool = False
+    """The critic also reads the episode's task, each parameter in [0, 1]; the actor, deployed, does not."""
     obs_clip: float = 10.0
     """Normalised observations are clipped to +-this."""
     torch_threads: int = 1
@@ -99,6 +104,8 @@ class PPOConfig:
         _require(len(self.hidden_sizes) >= 1 and min(self.hidden_sizes) >= 1, "hidden_sizes must be positive widths")
         _require(self.torch_threads >= 1, "torch_threads must be at least 1")
         _require(self.angle_features or not self.half_turn_block_yaw, "half_turn_block_yaw needs angle_features")
+        for name in ("normalize_values", "critic_task_inputs"):
+            _require(isinstance(getattr(self, name), bool), f"{name} must be true or false")
 
     def with_overrides(self, values: Mapping[str, Any]) -> PPOConfig:
         """This config with some fields replaced by values from the command line or JSON, checked by
@@ -131,7 +138,9 @@ _OPTIONAL_FLOATS = ("target_kl", "min_log_std")
 
 TEACHERS: tuple[TeacherKind, ...] = tuple(TEACHER_LABELS)
 """Every teacher kind the service ships, as the client's schemas list them (``GET /api/v1/teachers`` says the
-same of a running service; a test holds the two equal)."""
+same of a running service; a test holds the two equal). ``train`` takes any kind's name and lets the service,
+which registers the curriculum before anything starts, refuse one it does not know: a kind added to the
+service is one module and one line there, and trains at once."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
 LISTED_ENV_IDS: tuple[str, ...] = listed_env_ids()
 """The ids ``train --env`` lists: the KUKA families, then the MiniGrid level families; it also takes any
@@ -141,7 +150,8 @@ gymnasium environment with a task space as ``module:EnvId`` (``common.families``
 @dataclass(frozen=True)
 class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
-    """Curriculum teacher, one of ``TEACHERS``: manual is the book's lesson plan, fixed the hardest task alone."""
+    """Curriculum teacher, a kind of the service (``TEACHERS``; manual is the book's lesson plan, fixed the hardest
+    task alone); the service refuses a kind it does not know, or one that does not fit the task space."""
     env: str = ENV_ID
     """The environment: a KUKA family, a MiniGrid level family (levels = reset seeds) or module:EnvId."""
     levels: int = DEFAULT_LEVELS
@@ -174,7 +184,10 @@ class TrainConfig:
     """Algorithm hyperparameters."""
 
     def __post_init__(self) -> None:
-        _require(self.teacher in TEACHERS, f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
+        _require(
+            re.fullmatch(TEACHER_KIND_PATTERN, self.teacher) is not None,
+            f"teacher must be a kind's name such as {', '.join(TEACHERS[:3])}, got {self.teacher!r}",
+        )
         family = family_for(self.env)  # an UnusableEnvironment, a ValueError, for an id no family owns
         _require(1 <= self.levels <= MAX_LEVELS, f"levels must be between 1 and {MAX_LEVELS:,}, got {self.levels}")
         _require(self.total_steps >= 1, "total_steps must be at least 1")

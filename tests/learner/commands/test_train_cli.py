@@ -135,3 +135,10 @@ def test_the_hard_family_registers_its_own_task_space(tmp_path, capsys):
     error = capsys.readouterr().err
     assert "cannot register curriculum 'run'" in error
     assert all(name in error for name in ("obj_far", "shaping", "move_scale", "align_margin"))
+
+
+def test_a_kind_the_service_does_not_know_is_refused_with_its_message_before_ray_starts(tmp_path, capsys):
+    assert main(["train", "--teacher", "curious", "--run-dir", str(tmp_path / "run"), "--total-steps", "1"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("kuka-curriculum train: error: cannot register curriculum 'run'")
+    assert "'curious'" in error and len(error.splitlines()) == 1

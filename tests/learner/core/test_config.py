@@ -45,7 +45,7 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: TrainConfig(teacher="curious"), "teacher must be one of"),
+        (lambda: TrainConfig(teacher="Curious kind"), "teacher must be a kind's name"),
         (
             lambda: TrainConfig(env="KukaGrasp-v9"),
             "unknown environment .* expected one of KukaGrasp-v0, KukaGraspHard-v0",
