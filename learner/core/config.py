@@ -150,8 +150,7 @@ gymnasium environment with a task space as ``module:EnvId`` (``common.families``
 @dataclass(frozen=True)
 class TrainConfig:
     teacher: TeacherKind = "alp-gmm"
-    """Curriculum teacher, a kind of the service (``TEACHERS``; manual is the book's lesson plan, fixed the hardest
-    task alone); the service refuses a kind it does not know, or one that does not fit the task space."""
+    """Curriculum teacher, a kind of the service (``TEACHERS``): manual is the book's lesson plan, fixed the hardest."""
     env: str = ENV_ID
     """The environment: a KUKA family, a MiniGrid level family (levels = reset seeds) or module:EnvId."""
     levels: int = DEFAULT_LEVELS
