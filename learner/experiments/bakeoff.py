@@ -4,8 +4,8 @@ The command trains every teacher x seed as its own ``train`` run (``bakeoff_runs
 every point, so running the same command again carries on after Ctrl-C or a crash), evaluates each
 final policy on the hardest task as soon as that run is trained (then compresses its raw files and
 keeps only that evaluated checkpoint), plays the scripted controller on the
-same episode seeds, sums the runs up per teacher (``bakeoff_statistics``) and writes the results
-(``bakeoff_report``).
+same episode seeds, sums the runs up per teacher (``bakeoff_statistics``; over seeds, with rliable's ``run_statistics``
+against a baseline teacher) and writes the results (``bakeoff_report``).
 """
 
 from __future__ import annotations
@@ -14,13 +14,14 @@ import argparse
 import functools
 from pathlib import Path
 
-from learner.checkpoint_evaluation import EvaluationResult, scripted_evaluation
 from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
 from learner.commands.config_file import BakeoffConfigAction
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
+from learner.evaluation.checkpoint_evaluation import EvaluationResult, scripted_evaluation
 from learner.experiments.bakeoff_report import (
     LEARNING_CURVES,
+    PERFORMANCE_PROFILE,
     PLACEMENT_PLOT,
     RESULTS_JSON,
     RESULTS_MARKDOWN,
@@ -39,7 +40,7 @@ from learner.experiments.bakeoff_runs import (
     teacher_params_by_kind,
     train_runs,
 )
-from learner.experiments.bakeoff_statistics import TeacherResult
+from learner.experiments.bakeoff_statistics import DEFAULT_BASELINE, TeacherResult
 from learner.experiments.run_archive import archive_run
 
 
@@ -68,6 +69,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out", type=Path, default=Path("runs/bakeoff"), help="bake-off directory (default runs/bakeoff)"
+    )
+    parser.add_argument(
+        "--baseline",
+        choices=TEACHERS,
+        default=DEFAULT_BASELINE,
+        metavar="TEACHER",
+        help=f"the teacher the report's probability of improvement compares every other with, seed by seed "
+        f"(default {DEFAULT_BASELINE}: uniform random tasks); left out when it is not among the teachers. "
+        "A report setting only: changing it retrains nothing",
     )
     evaluation = parser.add_argument_group("final evaluation (hardest task)")
     evaluation.add_argument(
@@ -150,7 +160,7 @@ def _bakeoff(args: argparse.Namespace) -> int:
         args.max_episode_steps,
     )
     print(f"scripted controller: {scripted.summary()}")
-    write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed, scripted)
-    for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES, PLACEMENT_PLOT):
+    write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed, scripted, args.baseline)
+    for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES, PERFORMANCE_PROFILE, PLACEMENT_PLOT):
         print(args.out / name)
     return 0

@@ -13,37 +13,29 @@ from typing import Any
 
 import numpy as np
 
-from common.client.schemas import TEACHER_LABELS as TEACHER_LABELS  # placement_bands names teachers through here
+from common.client.schemas import TEACHER_LABELS
 from common.kuka import ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import task_space_for
-from learner.checkpoint_evaluation import EvaluationResult
 from learner.core.config import TrainConfig
-from learner.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
+from learner.core.json_file import write_json
+from learner.evaluation.checkpoint_evaluation import EvaluationResult
+from learner.evaluation.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
+from learner.evaluation.stats import CONFIDENCE, Interval
 from learner.experiments.bakeoff_runs import learning_curve
 from learner.experiments.bakeoff_statistics import (
     CURVE_WINDOW,
+    DEFAULT_BASELINE,
     HALF_SUCCESS,
     STEP_TARGETS,
     SUCCESS_TARGET,
     TeacherResult,
     median_steps,
+    seed_statistics,
 )
-from learner.experiments.run_statistics import (
-    REPS,
-    SEED,
-    RunStatistics,
-    plot_performance_profile,
-    run_statistics,
-    statistics_table,
-)
-from learner.json_file import write_json
-from learner.stats import CONFIDENCE, Interval
+from learner.experiments.run_statistics import REPS, SEED, RunStatistics, plot_performance_profile, statistics_table
 
-DEFAULT_BASELINE = "random"
-"""The teacher every other is compared with, run by run: uniform random tasks, the curriculum a teacher
-must beat to be worth its machinery (the field's usual baseline; the book reports none)."""
 BOOK_RETURNS = {"alp-gmm": 3.71, "fixed": 2.81, "manual": -2.79}
 """The book's chapter 14: mean scaled return over 100 episodes on the hardest task, one seed, ~1.7M steps."""
 
@@ -160,6 +152,47 @@ def placement_markdown(results: Sequence[TeacherResult], scripted: EvaluationRes
     ]
 
 
+def seed_scores(results: Sequence[TeacherResult]) -> dict[str, list[float]]:
+    """Each teacher's per-seed success rates on the hardest task: the scores its run statistics are over."""
+    return {result.teacher: result.seed_success_rates for result in results}
+
+
+def run_statistics_markdown(statistics: RunStatistics, baseline: str) -> list[str]:
+    """The section on what the seeds can tell apart: the run statistics' table, what its figures mean, and the
+    performance profile; ``baseline`` is the one asked for, which ``statistics`` lacks when it was not run."""
+    labels = {teacher: f"{teacher_label(teacher)} (`{teacher}`)" for teacher in statistics.arms}
+    if statistics.baseline is None:
+        improvement = (
+            f"P(improvement) needs the baseline, {teacher_label(baseline)} (`{baseline}`), among the teachers: "
+            "train it too, or name another with `--baseline`."
+        )
+    else:
+        improvement = (
+            f"P(improvement) is the chance that a seed of the teacher ends above a seed of "
+            f"{teacher_label(statistics.baseline)}, ties counted half, over every pair of their seeds: 0.50 is "
+            "no difference, 1.00 every seed above every one of the baseline's."
+        )
+    return [
+        "## Over seeds, robustly: what the runs can tell apart",
+        "",
+        "Each seed's score is its final policy's success rate on the hardest task (the table above). Computed "
+        "with rliable (Agarwal et al., NeurIPS 2021), which showed that a few seeds and a point estimate "
+        "mis-rank methods.",
+        "",
+        *statistics_table(statistics, labels),
+        "",
+        "The IQM is the mean of the middle half of the seeds, which one freak seed cannot drag (under four "
+        f"seeds it trims nothing and is the mean). IQM and mean carry stratified-bootstrap percentile intervals "
+        f"({statistics.reps:_} resamples, seed {statistics.seed}); the share of seeds at "
+        f"{statistics.threshold:.0%} or more a Wilson interval. {improvement} A single seed leaves nothing to "
+        "resample (n/a); two or three leave so few distinct resamples that the bootstrap interval is narrower "
+        "than the truth.",
+        "",
+        f"![Performance profiles: the share of each teacher's seeds above each success rate]({PERFORMANCE_PROFILE})",
+        "",
+    ]
+
+
 def curve_seeds_note(results: Sequence[TeacherResult]) -> str:
     """What the in-run evaluations played: stratified seeds, and which runs, trained before them, played the
     consecutive seeds from 10,000 instead, whose steps read early."""
@@ -222,7 +255,13 @@ def results_markdown(
     episodes: int,
     seed: int,
     scripted: EvaluationResult | None = None,
+    statistics: RunStatistics | None = None,
+    baseline: str = DEFAULT_BASELINE,
 ) -> str:
+    """``statistics``: the run statistics over ``results`` against ``baseline`` (``seed_statistics``),
+    computed here when not given."""
+    if statistics is None:
+        statistics = seed_statistics(seed_scores(results), baseline)
     trained = ", ".join(
         _format_setting(name, value)
         for name, value in settings.items()
@@ -280,6 +319,7 @@ def results_markdown(
         f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest. "
         + curve_seeds_note(results),
         "",
+        *run_statistics_markdown(statistics, baseline),
         "## Pooled episodes: evaluation noise",
         "",
         f"| Teacher | Mean return ({CONFIDENCE:.0%} CI) | Success rate (Wilson {CONFIDENCE:.0%}) | Seeds "
@@ -370,9 +410,12 @@ def write_reports(
     episodes: int,
     seed: int,
     scripted: EvaluationResult | None = None,
+    baseline: str = DEFAULT_BASELINE,
 ) -> None:
     """Every report file; ``scripted`` is the scripted controller on the same episode seeds, for beside the
-    teachers in the placement table."""
+    teachers in the placement table; ``baseline`` the teacher the run statistics compare the others with."""
+    scores = seed_scores(results)
+    statistics = seed_statistics(scores, baseline)
     write_json(
         out / RESULTS_JSON,
         {
@@ -392,10 +435,56 @@ def write_reports(
                 "return": scripted.returns.to_dict(),
                 **placement_record(scripted.diagnosed()),
             },
+            "run_statistics": statistics.to_dict(),
         },
     )
-    (out / RESULTS_MARKDOWN).write_text(results_markdown(results, settings, episodes, seed, scripted), encoding="utf-8")
+    (out / RESULTS_MARKDOWN).write_text(
+        results_markdown(results, settings, episodes, seed, scripted, statistics, baseline), encoding="utf-8"
+    )
     plot_learning_curves(out / LEARNING_CURVES, results)
+    plot_profile(out / PERFORMANCE_PROFILE, scores, statistics)
     rows = placement_rows(results, scripted)
     if rows:
         plot_bands(out / PLACEMENT_PLOT, rows)
+
+
+def plot_profile(path: Path, scores: dict[str, list[float]], statistics: RunStatistics) -> None:
+    """The teachers' performance profiles, drawn as their run statistics were computed."""
+    plot_performance_profile(
+        path,
+        scores,
+        {teacher: teacher_label(teacher) for teacher in scores},
+        "Final hardest-task success: the share of each teacher's seeds above each rate",
+        statistics.reps,
+        statistics.seed,
+        statistics.confidence,
+    )
+
+
+def recompute_run_statistics(
+    results_json: Path,
+    out: Path | None = None,
+    baseline: str = DEFAULT_BASELINE,
+    reps: int = REPS,
+    seed: int = SEED,
+) -> RunStatistics:
+    """The run statistics of a bake-off from its ``results.json`` alone (the per-seed success rates every
+    version of it holds), for one written before them or against another baseline: ``run_statistics.json``,
+    ``run_statistics.md`` and the performance profile in ``out`` (default: beside it). The results files
+    themselves stay as they are."""
+    data = json.loads(results_json.read_text(encoding="utf-8"))
+    scores = {entry["teacher"]: [run["success_rate"] for run in entry["runs"]] for entry in data["teachers"]}
+    statistics = seed_statistics(scores, baseline, reps, seed)
+    out = results_json.parent if out is None else out
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / RUN_STATISTICS_JSON, statistics.to_dict())
+    section = run_statistics_markdown(statistics, baseline)
+    section[0] = f"# Run statistics of the bake-off in {results_json.parent.name}"
+    section[2] = (
+        f"Recomputed from its `{results_json.name}`. Each seed's score is its final policy's success rate on the "
+        "hardest task. Computed with rliable (Agarwal et al., NeurIPS 2021), which showed that a few seeds and a "
+        "point estimate mis-rank methods."
+    )
+    (out / RUN_STATISTICS_MARKDOWN).write_text("\n".join(section), encoding="utf-8")
+    plot_profile(out / PERFORMANCE_PROFILE, scores, statistics)
+    return statistics

@@ -6,7 +6,7 @@ evaluations and metrics logs; nothing here writes.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -14,9 +14,10 @@ import numpy as np
 
 from common.kuka import ENV_ID
 from common.kuka.diagnostics import EpisodeDiagnostics
-from learner.checkpoint_evaluation import EvaluationResult
+from learner.evaluation.checkpoint_evaluation import EvaluationResult
+from learner.evaluation.stats import Interval, mean_interval, wilson_interval
 from learner.experiments.bakeoff_runs import Run, curve_seeds, learning_curve
-from learner.stats import Interval, mean_interval, wilson_interval
+from learner.experiments.run_statistics import REPS, SEED, RunStatistics, run_statistics
 
 SUCCESS_TARGET = 0.8
 """The success rate on the hardest task whose first crossing the report times."""
@@ -26,6 +27,9 @@ STEP_TARGETS = (HALF_SUCCESS, SUCCESS_TARGET)
 """The success rates whose first crossing the report times."""
 CURVE_WINDOW = 3
 """Consecutive in-run evaluations pooled for that reading, so it is not one small evaluation's luck."""
+DEFAULT_BASELINE = "random"
+"""The teacher every other is compared with, seed by seed: uniform random tasks, the curriculum a teacher
+must beat to be worth its machinery (the field's usual baseline; the book reports none)."""
 
 
 def steps_to_success(run: Run, target: float = SUCCESS_TARGET, window: int = CURVE_WINDOW) -> int | None:
@@ -43,6 +47,14 @@ def steps_to_success(run: Run, target: float = SUCCESS_TARGET, window: int = CUR
         if np.mean([rate for _, rate in curve[end - window : end]]) >= target:
             return curve[end - 1][0]
     return None
+
+
+def seed_statistics(
+    scores: Mapping[str, Sequence[float]], baseline: str = DEFAULT_BASELINE, reps: int = REPS, seed: int = SEED
+) -> RunStatistics:
+    """rliable's figures over each teacher's per-seed success rates (``run_statistics``), a seed counting as
+    good at the success target; with the baseline not among the teachers, no probability of improvement."""
+    return run_statistics(scores, baseline if baseline in scores else None, SUCCESS_TARGET, reps, seed)
 
 
 def median_steps(steps: Sequence[int | None]) -> float | None:
