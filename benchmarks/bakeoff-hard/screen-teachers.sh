@@ -15,7 +15,8 @@
 #   mkdir -p runs/hard-screen-v4 && setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v4/teachers.log 2>&1 &
 #   mkdir -p runs/hard-screen-v1 && ENV_ID=KukaGraspHard-v1 setsid nohup nice -n 10 benchmarks/bakeoff-hard/screen-teachers.sh > runs/hard-screen-v1/teachers.log 2>&1 &
 #
-# Variables: ENV_ID (KukaGraspHard-v0, the default, or KukaGraspHard-v1), PYTHON (default .venv/bin/python),
+# Variables: ENV_ID (KukaGraspHard-v0, the default, or KukaGraspHard-v1), LIST (another list of lines, such as
+# issue 80's screen-i80.txt, whose runs are kept under the same prefix), PYTHON (default .venv/bin/python),
 # OUT (default runs/hard-screen-v4 or runs/hard-screen-v1), SCREEN_EPISODES (the final evaluation's episodes,
 # default 100; issue 59's lines in screen-hard-v1.txt take 500).
 set -euo pipefail
@@ -24,8 +25,8 @@ PYTHON=${PYTHON:-.venv/bin/python}
 HERE=benchmarks/bakeoff-hard
 ENV_ID=${ENV_ID:-KukaGraspHard-v0}
 case "$ENV_ID" in
-    KukaGraspHard-v0) LIST=$HERE/screen-teachers.txt PREFIX=v4 OUT=${OUT:-runs/hard-screen-v4} ;;
-    KukaGraspHard-v1) LIST=$HERE/screen-hard-v1.txt PREFIX=hard-v1 OUT=${OUT:-runs/hard-screen-v1} ;;
+    KukaGraspHard-v0) LIST=${LIST:-$HERE/screen-teachers.txt} PREFIX=v4 OUT=${OUT:-runs/hard-screen-v4} ;;
+    KukaGraspHard-v1) LIST=${LIST:-$HERE/screen-hard-v1.txt} PREFIX=hard-v1 OUT=${OUT:-runs/hard-screen-v1} ;;
     *) echo "ENV_ID must be KukaGraspHard-v0 or KukaGraspHard-v1, got $ENV_ID" >&2 && exit 2 ;;
 esac
 mkdir -p "$OUT"
