@@ -9,9 +9,10 @@ import math
 import imageio.v3 as iio
 import numpy as np
 import pytest
-from rliable import library
+from rliable import library, metrics
 
 from learner.experiments.run_statistics import (
+    _improvement,
     _share_above,
     plot_performance_profile,
     run_statistics,
@@ -55,6 +56,15 @@ def test_the_probability_of_improvement_counts_every_pair_of_runs_and_ties_half(
     assert arms["mixed"].improvement.estimate == pytest.approx(0.875)
     assert arms["same"].improvement.estimate == pytest.approx(0.5)
     assert arms["mixed"].improvement.low < 0.875 <= arms["mixed"].improvement.high == 1.0
+
+
+def test_the_improvement_resampled_is_rliables_probability_of_improvement():
+    generator = np.random.default_rng(0)
+    for runs_x, runs_y in [(1, 1), (2, 5), (5, 3), (10, 10)]:
+        for _ in range(20):
+            # Scores on a coarse grid, so that ties between runs are common.
+            x, y = (generator.integers(0, 5, (runs, 1)) / 4 for runs in (runs_x, runs_y))
+            assert _improvement(x, y) == pytest.approx(metrics.probability_of_improvement(x, y))
 
 
 def test_the_share_of_runs_at_or_above_the_threshold_carries_its_wilson_interval():
