@@ -183,7 +183,7 @@ def run_statistics_markdown(statistics: RunStatistics, baseline: str) -> list[st
         "",
         "The IQM is the mean of the middle half of the seeds, which one freak seed cannot drag (under four "
         f"seeds it trims nothing and is the mean). IQM and mean carry stratified-bootstrap percentile intervals "
-        f"({statistics.reps:_} resamples, seed {statistics.seed}); the share of seeds at "
+        f"({statistics.reps:,} resamples, seed {statistics.seed}); the share of seeds at "
         f"{statistics.threshold:.0%} or more a Wilson interval. {improvement} A single seed leaves nothing to "
         "resample (n/a); two or three leave so few distinct resamples that the bootstrap interval is narrower "
         "than the truth.",

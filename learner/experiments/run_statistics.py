@@ -219,7 +219,7 @@ def plot_performance_profile(
             )
         profiles[name] = profile[name]
         bands[name] = band[name]
-    figure = Figure(figsize=(8.0, 4.8), layout="constrained")
+    figure = Figure(figsize=(10.0, 4.8), layout="constrained")
     axes = figure.add_subplot()
     plot_utils.plot_performance_profiles(
         profiles,
@@ -231,7 +231,7 @@ def plot_performance_profile(
         labelsize="medium",
         ticklabelsize="medium",
     )
-    axes.legend(loc="upper right", fontsize="small")
+    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize="small")
     axes.set_title(title or f"Performance profiles ({confidence:.0%} bootstrap bands over runs)", fontsize="medium")
     figure.savefig(path, dpi=110)
 
