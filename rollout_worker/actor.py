@@ -20,7 +20,7 @@ import numpy as np
 import ray
 from pydantic import SecretStr
 
-from common.client.task_space import Task
+from common.client.task_space import Task, TaskSpace
 from common.client.teacher_client import Assignment, TeacherClient
 from common.families import family_for
 from common.kuka import ENV_ID
@@ -63,6 +63,8 @@ class WorkerSettings:
     env_options: Mapping[str, Any] = field(default_factory=dict)
     """The family's training-only options for the training environments (a hard KUKA family's
     ``edge_placement_share``); evaluation episodes play the environment without them."""
+    task_space: TaskSpace | None = None
+    """The run's task space, which scales each episode's task for a critic that reads it (None: it reads none)."""
 
 
 class _TeacherTasks:
@@ -110,7 +112,7 @@ class RolloutWorker:
             self.family.make_env(settings.env_id, settings.max_episode_steps, options=settings.env_options)
             for _ in range(settings.num_envs)
         ]
-        self.sampler = Sampler(envs, tasks, seed, settings.score_discount)
+        self.sampler = Sampler(envs, tasks, seed, settings.score_discount, settings.task_space)
         self.evaluation_env: gym.Env[np.ndarray, Any] | None = None
         self.policy: InferencePolicy | None = None
         self._dropped_reported = 0

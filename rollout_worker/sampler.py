@@ -6,7 +6,9 @@ box's (clipped into it) or a ``Discrete`` space's (a categorical policy's indice
 config's discount (``ScoreDiscount``), each finished episode carries its score, PLR's positive value
 loss, computed here from the rewards and the values the policy predicted as it acted, since only the
 worker sees whole episodes; and an episode whose task is score-only has its steps marked in the batch,
-for the learner to leave out.
+for the learner to leave out. Given the run's task space, it feeds a critic that reads the task
+(``PolicySpec.critic_task_dim``) each environment's current task, scaled to [0, 1], and the batch carries
+those inputs for the learner's critic.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from typing import Any, Protocol, cast
 import gymnasium as gym
 import numpy as np
 
-from common.client.task_space import Task
+from common.client.task_space import Task, TaskSpace
 from common.client.teacher_client import Assignment
 from common.policy.inference import InferencePolicy
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
@@ -86,13 +88,16 @@ class Sampler:
         tasks: TaskSource,
         seed: int,
         score_discount: ScoreDiscount | None = None,
+        task_space: TaskSpace | None = None,
     ) -> None:
-        """``score_discount``: score each finished episode with it (None: no scores)."""
+        """``score_discount``: score each finished episode with it (None: no scores). ``task_space``: the run's,
+        which scales each episode's task for a critic that reads it (None: only policies whose critic does not)."""
         if not envs:
             raise ValueError("a sampler needs at least one environment")
         self.envs = list(envs)
         self.tasks = tasks
         self.score_discount = score_discount
+        self.task_space = task_space
         space = self.envs[0].action_space
         self._discrete = isinstance(space, gym.spaces.Discrete)
         if not self._discrete:
@@ -106,6 +111,8 @@ class Sampler:
         self._lengths = np.zeros(num_envs, dtype=np.int64)
         self._carried: list[tuple[np.ndarray, np.ndarray]] = [_NOTHING_CARRIED] * num_envs
         """Per environment, the rewards and values of its episode's steps in earlier batches (for its score)."""
+        self._critic_tasks = None if task_space is None else np.zeros((num_envs, len(task_space)), dtype=np.float32)
+        """Per environment, its episode's task scaled to [0, 1] by ``task_space``: what a critic that reads it reads."""
         env_seeds = np.random.SeedSequence(seed).generate_state(num_envs)
         self._observations = np.stack(
             [self._start_episode(index, seed=int(env_seed)) for index, env_seed in enumerate(env_seeds)]
@@ -115,6 +122,8 @@ class Sampler:
         assignment = self.tasks.next_task()
         self._episode_tasks[index] = assignment
         self._score_only[index] = assignment.score_only
+        if self.task_space is not None and self._critic_tasks is not None:
+            self._critic_tasks[index] = self.task_space.to_unit(self.task_space.to_array(assignment.params))
         self._returns[index] = 0.0
         self._lengths[index] = 0
         observation, _ = self.envs[index].reset(seed=seed, options={"task": assignment.params})
@@ -136,19 +145,23 @@ class Sampler:
 
     def sample(self, policy: InferencePolicy, num_steps: int) -> TrajectoryBatch:
         """Step every environment ``num_steps`` times and return the batch."""
+        tasks_now = self._critic_inputs(policy)
         num_envs = len(self.envs)
         obs_dim = self._observations.shape[1]
         observations = np.zeros((num_steps, num_envs, obs_dim), dtype=np.float32)
         actions = np.zeros((num_steps, num_envs, self._action_dim), dtype=np.float32)
         log_probs, values, rewards, final_values = (np.zeros((num_steps, num_envs), dtype=np.float32) for _ in range(4))
         terminated, truncated, score_only = (np.zeros((num_steps, num_envs), dtype=bool) for _ in range(3))
+        critic_tasks = None if tasks_now is None else np.zeros((num_steps, *tasks_now.shape), dtype=np.float32)
         episode_starts = np.zeros(num_envs, dtype=np.int64)
         episodes: list[EpisodeStats] = []
 
         for step in range(num_steps):
             observations[step] = self._observations
             score_only[step] = self._score_only
-            actions[step], log_probs[step], values[step] = policy.act(self._observations)
+            if critic_tasks is not None:
+                critic_tasks[step] = tasks_now
+            actions[step], log_probs[step], values[step] = policy.act(self._observations, critic_tasks=tasks_now)
             if self._discrete:
                 env_actions = actions[step, :, 0].astype(np.int64)
             else:
@@ -170,7 +183,8 @@ class Sampler:
                     self._observations[index] = observation
             if cut_short:
                 indices, final_observations = zip(*cut_short, strict=True)
-                final_values[step, list(indices)] = policy.value(np.stack(final_observations))
+                ended_tasks = None if tasks_now is None else tasks_now[list(indices)]  # before the next task is drawn
+                final_values[step, list(indices)] = policy.value(np.stack(final_observations), ended_tasks)
             # Each episode's result goes out, and its environment's next task is drawn, once the step's
             # bootstrap values are known: its score needs the value after its last step.
             for index, info in ended_here:
@@ -193,11 +207,23 @@ class Sampler:
             terminated=terminated,
             truncated=truncated,
             final_values=final_values,
-            last_values=policy.value(self._observations),
+            last_values=policy.value(self._observations, tasks_now),
             policy_version=policy.version,
             episodes=episodes,
             score_only=score_only if score_only.any() else None,
+            critic_tasks=critic_tasks,
         )
+
+    def _critic_inputs(self, policy: InferencePolicy) -> np.ndarray | None:
+        """The environments' current tasks as ``policy``'s critic reads them (updated in place as episodes
+        start), or None where it reads none."""
+        wanted = policy.spec.critic_task_dim
+        if not wanted:
+            return None
+        if self._critic_tasks is None or self._critic_tasks.shape[1] != wanted:
+            have = "no task space" if self._critic_tasks is None else f"a task space of {self._critic_tasks.shape[1]}"
+            raise ValueError(f"the policy's critic reads {wanted} task parameters; this sampler was given {have}")
+        return self._critic_tasks
 
     def _score(
         self, index: int, rewards: np.ndarray, values: np.ndarray, start: int, step: int, bootstrap: float
@@ -230,7 +256,8 @@ def run_episodes(
     seeds: Sequence[int],
     deterministic: bool = True,
 ) -> list[EpisodeStats]:
-    """Play one whole episode per seed on a fixed task (evaluation: nothing is reported anywhere)."""
+    """Play one whole episode per seed on a fixed task (evaluation: nothing is reported anywhere). The actor
+    acts alone: no values are needed, so a critic that reads the task is never asked (``InferencePolicy.act``)."""
     results = []
     discrete = isinstance(env.action_space, gym.spaces.Discrete)
     if not discrete:

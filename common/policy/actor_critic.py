@@ -91,10 +91,11 @@ def image_encoder(shape: tuple[int, int, int]) -> tuple[list[nn.Module], int]:
     return [*modules, nn.Flatten()], height * width * channels
 
 
-def _head(spec: PolicySpec, outputs: int, output_gain: float) -> nn.Sequential:
-    """A head's network: a tanh MLP on the features, or, for an image, on its own ``image_encoder``'s output."""
+def _head(spec: PolicySpec, outputs: int, output_gain: float, task_dim: int = 0) -> nn.Sequential:
+    """A head's network: a tanh MLP on the features (and ``task_dim`` task inputs after them), or, for an image,
+    on its own ``image_encoder``'s output."""
     if spec.image_shape is None:
-        return _mlp([spec.feature_dim, *spec.hidden_sizes, outputs], output_gain)
+        return _mlp([spec.feature_dim + task_dim, *spec.hidden_sizes, outputs], output_gain)
     encoder, width = image_encoder(spec.image_shape)
     return nn.Sequential(*encoder, *_mlp([width, *spec.hidden_sizes, outputs], output_gain))
 
@@ -109,7 +110,9 @@ class ActorCritic(nn.Module):
 
     With a state-dependent std the actor's head has twice the outputs, the mean's then the log-std's;
     the latter start at ``init_log_std`` in every state (zero bias offset, near-zero weights), and
-    ``actor_log_std`` does not exist.
+    ``actor_log_std`` does not exist. With ``PolicySpec.critic_task_dim`` the critic also reads the episode's
+    task after the features (asymmetric actor-critic, Pinto et al. 2018): the value of a state depends on the
+    task the teacher set, which the actor, the part that is deployed, never needs.
     """
 
     def __init__(self, spec: PolicySpec) -> None:
@@ -118,7 +121,7 @@ class ActorCritic(nn.Module):
         outputs = 2 * spec.action_dim if spec.state_dependent_std else spec.action_dim
         self.actor_mean = _head(spec, outputs, output_gain=0.01)
         """The Gaussian's means (and per-state log-stds), or a categorical policy's logits, near uniform at first."""
-        self.critic = _head(spec, 1, output_gain=1.0)
+        self.critic = _head(spec, 1, output_gain=1.0, task_dim=spec.critic_task_dim)
         if spec.categorical:
             return
         if spec.state_dependent_std:
@@ -143,23 +146,29 @@ class ActorCritic(nn.Module):
             with torch.no_grad():
                 self.actor_log_std.clamp_(min=self.spec.min_log_std)
 
-    def value(self, observations: torch.Tensor) -> torch.Tensor:
+    def value(self, observations: torch.Tensor, critic_tasks: torch.Tensor | None = None) -> torch.Tensor:
+        """Values (n,) of normalised observations, with their tasks (n, critic_task_dim) where the critic reads them."""
+        if self.spec.critic_task_dim:
+            if critic_tasks is None:
+                raise ValueError("this critic reads the task: pass each observation's critic_tasks")
+            observations = torch.cat([observations, critic_tasks], dim=-1)
         values: torch.Tensor = self.critic(observations)
         return values.squeeze(-1)
 
     def evaluate(
-        self, observations: torch.Tensor, actions: torch.Tensor
+        self, observations: torch.Tensor, actions: torch.Tensor, critic_tasks: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Return (log-probability, entropy, value) of given actions, with gradients; a categorical policy's
-        actions are (n, 1) indices as floats."""
+        actions are (n, 1) indices as floats; ``critic_tasks`` as for ``value``."""
+        values = self.value(observations, critic_tasks)
         if self.spec.categorical:
             log_probs = torch.log_softmax(self.actor_mean(observations), dim=-1)
             chosen = log_probs.gather(-1, actions.long()).squeeze(-1)
             entropy = -(log_probs.exp() * log_probs).sum(-1)
-            return chosen, entropy, self.value(observations)
+            return chosen, entropy, values
         mean, log_std = self.mean_and_log_std(observations)
         entropy = (0.5 + LOG_SQRT_2PI + log_std).sum(-1).expand(mean.shape[0])
-        return self._log_prob(mean, log_std, actions), entropy, self.value(observations)
+        return self._log_prob(mean, log_std, actions), entropy, values
 
     @staticmethod
     def _log_prob(mean: torch.Tensor, log_std: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -237,13 +246,23 @@ def numpy_copy(tensor: torch.Tensor) -> np.ndarray:
     return array
 
 
-def capture_snapshot(network: ActorCritic, normalizer: RunningNormalizer, version: int) -> PolicySnapshot:
+def capture_snapshot(
+    network: ActorCritic, normalizer: RunningNormalizer, version: int, value_scale: tuple[float, float] | None = None
+) -> PolicySnapshot:
     """The network's current layers and the normaliser's statistics as plain numpy, for the rollout
-    workers (the learner's side: the one step from torch to a ``PolicySnapshot``)."""
+    workers (the learner's side: the one step from torch to a ``PolicySnapshot``). ``value_scale`` (mean,
+    std): the critic outputs standardised values, and its last layer is rescaled here so that the workers'
+    values come out on the returns' scale, as GAE and the episodes' scores need them."""
+    critic = head_layers(network.critic)
+    if value_scale is not None:
+        mean, std = value_scale
+        last = critic[-1]
+        assert isinstance(last, DenseLayer) and not last.activations, "a critic ends in a plain linear layer"
+        critic = (*critic[:-1], replace(last, weight=last.weight * std, bias=last.bias * std + mean))
     return PolicySnapshot(
         network.spec,
         head_layers(network.actor_mean),
-        head_layers(network.critic),
+        critic,
         None if network.spec.state_dependent_std or network.spec.categorical else numpy_copy(network.actor_log_std),
         normalizer.state(),
         normalizer.clip,

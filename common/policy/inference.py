@@ -72,8 +72,13 @@ class PolicySpec:
     """(height, width, channels) of an image observation (pixels 0..255), which arrives flattened in row-major
     (height, width, channels) order, ``image.reshape(-1)``, as float32: each network then starts with a small
     CNN (``actor_critic.image_encoder``) and the observation normaliser is not applied. None: a flat vector."""
+    critic_task_dim: int = 0
+    """Width of the episode's task, in [0, 1] per parameter, that the critic reads after the observation's
+    features (asymmetric actor-critic: the actor never sees it); 0: the critic reads what the actor reads."""
 
     def __post_init__(self) -> None:
+        if self.critic_task_dim < 0:
+            raise ValueError(f"critic_task_dim must be 0 or more, got {self.critic_task_dim}")
         if self.image_shape is not None:
             self._check_image()
         if self.categorical and (self.state_dependent_std or self.min_log_std is not None or self.action_dim < 2):
@@ -115,6 +120,11 @@ class PolicySpec:
                 "an image observation has no angle_indices, world_offsets or half_turn_indices, "
                 f"got {self.angle_indices}, {self.world_offsets}, {self.half_turn_indices}"
             )
+        if self.critic_task_dim:
+            raise ValueError(
+                "a critic that reads the task needs a flat observation: its task joins the features an MLP reads, "
+                f"and an image's critic starts with convolutions (critic_task_dim {self.critic_task_dim})"
+            )
 
     def _distinct_entries(self, indices: tuple[int, ...]) -> bool:
         """Whether ``indices`` name distinct entries of an observation."""
@@ -124,6 +134,11 @@ class PolicySpec:
     def feature_dim(self) -> int:
         """Width of the networks' input: every angle becomes two features, every world offset adds two."""
         return self.obs_dim + len(self.angle_indices) + 2 * len(self.world_offsets)
+
+    @property
+    def critic_input_dim(self) -> int:
+        """Width of the critic's input: the features, then the task where the critic reads it."""
+        return self.feature_dim + self.critic_task_dim
 
     @property
     def normalizes_observations(self) -> bool:
@@ -270,12 +285,15 @@ class InferencePolicy:
 
     At the batch sizes of environment stepping (a handful of observations), per-operation overhead,
     not arithmetic, is the cost: a torch call costs several times a numpy one. So the snapshot's
-    layers run as numpy; when the actor and critic heads have the same shape of layers they are
-    fused into one block-diagonal stack when loaded (half the operations), and the observation
-    normaliser's scale is precomputed. An image spec's heads each start with their own convolutions, run
-    as im2col (one strided view of every patch) and a matmul, and are not fused. The layers are those
-    ``actor_critic.capture_snapshot`` read from the network's modules, so a change to ``ActorCritic``'s
-    heads needs no change here; ``ActorCritic.evaluate`` is the reference these numbers must match.
+    layers run as numpy; when the actor and critic heads read the same input and have the same shape of
+    layers they are fused into one block-diagonal stack when loaded (half the operations), and the
+    observation normaliser's scale is precomputed. A critic that reads the task
+    (``PolicySpec.critic_task_dim``) takes it, already in [0, 1], after the normalised features, as
+    ``ActorCritic.value`` does, and is not fused. An image spec's heads each start with their own
+    convolutions, run as im2col (one strided view of every patch) and a matmul, and are not fused. The
+    layers are those ``actor_critic.capture_snapshot`` read from the network's modules, so a change to
+    ``ActorCritic``'s heads needs no change here; ``ActorCritic.evaluate`` is the reference these numbers
+    must match.
     """
 
     def __init__(self, snapshot: PolicySnapshot, seed: int | None = None) -> None:
@@ -303,8 +321,9 @@ class InferencePolicy:
         self._obs_clip = snapshot.obs_clip
         self.version = snapshot.version
 
-    def _forward(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The actor head's outputs (n, action_dim, or twice that with a state-dependent std) and values (n,)."""
+    def _forward(self, observations: np.ndarray, critic_tasks: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The actor head's outputs (n, action_dim, or twice that with a state-dependent std) and values (n,):
+        NaN where the critic reads the task and ``critic_tasks`` is None, so the actor acts alone."""
         if self.spec.normalizes_observations:
             scaled = (self._features(np.atleast_2d(observations)) - self._obs_mean) * self._obs_inverse_scale
             inputs = np.clip(scaled, -self._obs_clip, self._obs_clip).astype(np.float32)
@@ -314,12 +333,22 @@ class InferencePolicy:
             output = _run(self._heads[0], inputs)
             return output[:, :-1], output[:, -1]
         actor, critic = self._heads
-        return _run(actor, inputs), _run(critic, inputs)[:, 0]
+        actor_output = _run(actor, inputs)
+        if not self.spec.critic_task_dim:
+            return actor_output, _run(critic, inputs)[:, 0]
+        if critic_tasks is None:
+            return actor_output, np.full(len(inputs), np.nan, dtype=np.float32)
+        tasks = np.atleast_2d(critic_tasks).astype(np.float32, copy=False)
+        return actor_output, _run(critic, np.concatenate([inputs, tasks], axis=-1))[:, 0]
 
-    def act(self, observations: np.ndarray, deterministic: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def act(
+        self, observations: np.ndarray, deterministic: bool = False, critic_tasks: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return (actions, log-probabilities, values) for raw observations of shape (n, obs_dim): actions
-        (n, action_dim), or (n, 1) chosen indices as floats for a categorical policy."""
-        actor, values = self._forward(observations)
+        (n, action_dim), or (n, 1) chosen indices as floats for a categorical policy. ``critic_tasks`` (n,
+        critic_task_dim) is each episode's task for a critic that reads it; without them such a critic's
+        values are NaN (an evaluation acts with the actor alone) and any other ignores them."""
+        actor, values = self._forward(observations, critic_tasks)
         if self.spec.categorical:
             return (*self._choose(actor, deterministic), values)
         mean = actor[:, : self.spec.action_dim]
@@ -347,8 +376,11 @@ class InferencePolicy:
         picked = np.take_along_axis(log_probs, chosen[:, None], axis=-1)[:, 0]
         return chosen[:, None].astype(np.float32), picked.astype(np.float32)
 
-    def value(self, observations: np.ndarray) -> np.ndarray:
-        return self._forward(observations)[1]
+    def value(self, observations: np.ndarray, critic_tasks: np.ndarray | None = None) -> np.ndarray:
+        """Values (n,) of raw observations, with each episode's task where the critic reads it (``act``)."""
+        if self.spec.critic_task_dim and critic_tasks is None:
+            raise ValueError("this policy's critic reads the task: pass each observation's critic_tasks")
+        return self._forward(observations, critic_tasks)[1]
 
 
 def _dense_only(head: tuple[Layer, ...]) -> TypeGuard[tuple[DenseLayer, ...]]:
@@ -356,10 +388,13 @@ def _dense_only(head: tuple[Layer, ...]) -> TypeGuard[tuple[DenseLayer, ...]]:
 
 
 def _fuse(actor: tuple[DenseLayer, ...], critic: tuple[DenseLayer, ...]) -> tuple[DenseLayer, ...] | None:
-    """One stack computing both heads side by side (actor outputs first), or None where their layers
-    differ in number or activations. Both heads read the same input, so the first layers stack
-    their rows; later ones are block-diagonal, each half reading its own head's features."""
+    """One stack computing both heads side by side (actor outputs first), or None where their inputs
+    differ in width (a critic that reads the task) or their layers in number or activations. Both heads
+    read the same input, so the first layers stack their rows; later ones are block-diagonal, each half
+    reading its own head's features."""
     if len(actor) != len(critic) or any(a.activations != c.activations for a, c in zip(actor, critic, strict=True)):
+        return None
+    if actor[0].weight.shape[1] != critic[0].weight.shape[1]:
         return None
     first = DenseLayer(
         np.concatenate([actor[0].weight, critic[0].weight]),

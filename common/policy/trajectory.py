@@ -39,7 +39,8 @@ class TrajectoryBatch:
     episode was truncated (zero elsewhere), and ``last_values`` holds V(next observation) for every
     environment after the final step. ``score_only`` marks the steps of episodes whose task was issued for
     scoring only: they are played and reported, and their advantages computed, but the update leaves
-    them out (None: no such step).
+    them out (None: no such step). ``critic_tasks`` holds, for a critic that reads the task, each step's
+    episode's task as the workers' critic read it (None: the critic reads none).
     """
 
     observations: np.ndarray
@@ -54,6 +55,8 @@ class TrajectoryBatch:
     policy_version: int
     episodes: list[EpisodeStats] = field(default_factory=list)
     score_only: np.ndarray | None = None
+    critic_tasks: np.ndarray | None = None
+    """(steps, envs, critic_task_dim) float32: the task parameters, each scaled to [0, 1] by the run's task space."""
     results_waiting: int = 0
     """Results the worker's teacher client held for delivery when the batch was made (an outage
     shows here first)."""

@@ -4,17 +4,21 @@ the policy a checkpoint holds."""
 from __future__ import annotations
 
 from common.families import family_for
+from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import PolicySnapshot, PolicySpec
 from learner.core.checkpoint import Checkpoint
 from learner.core.config import PPOConfig
 from learner.core.ppo import PPOLearner
 
 
-def policy_spec_for(env_id: str, ppo: PPOConfig) -> PolicySpec:
+def policy_spec_for(env_id: str, ppo: PPOConfig, levels: int = DEFAULT_LEVELS) -> PolicySpec:
     """The network's shape for a run on ``env_id``: its family's encoder and head, with the options of ``ppo``
-    that apply there (a Gaussian's log-std; KUKA's angle features, the block's world offset and half-turn yaw)."""
-    shape = family_for(env_id).policy_shape(env_id)
+    that apply there (a Gaussian's log-std; KUKA's angle features, the block's world offset and half-turn yaw;
+    a critic that reads the task, as wide as the run's task space, which ``levels`` sizes for a level family)."""
+    family = family_for(env_id)
+    shape = family.policy_shape(env_id)
     angles = shape.angle_indices if ppo.angle_features else ()
+    critic_task_dim = len(family.task_space(env_id, levels)) if ppo.critic_task_inputs else 0
     if shape.categorical:
         return PolicySpec(
             obs_dim=shape.observation_dim,
@@ -22,6 +26,7 @@ def policy_spec_for(env_id: str, ppo: PPOConfig) -> PolicySpec:
             hidden_sizes=ppo.hidden_sizes,
             categorical=True,
             image_shape=shape.image_shape,
+            critic_task_dim=critic_task_dim,
         )
     return PolicySpec(
         obs_dim=shape.observation_dim,
@@ -36,12 +41,13 @@ def policy_spec_for(env_id: str, ppo: PPOConfig) -> PolicySpec:
         if ppo.half_turn_block_yaw
         else (),
         image_shape=shape.image_shape,
+        critic_task_dim=critic_task_dim,
     )
 
 
 def policy_snapshot(checkpoint: Checkpoint) -> PolicySnapshot:
     """The policy a checkpoint holds, in the form the rollout workers act with."""
-    spec = policy_spec_for(checkpoint.config.env, checkpoint.config.ppo)
+    spec = policy_spec_for(checkpoint.config.env, checkpoint.config.ppo, checkpoint.config.levels)
     learner = PPOLearner(spec, checkpoint.config.ppo, checkpoint.config.seed)
     learner.load_policy_state(checkpoint.learner)
     return learner.snapshot()

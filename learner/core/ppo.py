@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from common.policy.actor_critic import ActorCritic, ObservationFeatures, PolicySnapshot, PolicySpec, capture_snapshot
-from common.policy.normalizer import NormalizerState, RunningNormalizer
+from common.policy.normalizer import NORMALIZER_EPSILON, NormalizerState, RunningNormalizer
 from common.policy.trajectory import TrajectoryBatch
 from learner.core.checkpoint import RESUME_ONLY_STATE, EvaluationOnlyCheckpointError
 from learner.core.config import PPOConfig
@@ -105,6 +105,14 @@ class PPOLearner:
     An image spec's normaliser is never updated nor applied (``PolicySpec.normalizes_observations``): its
     encoder scales the pixels itself. It is kept, at its start, so that checkpoints and snapshots hold the
     same state whatever the observation.
+
+    With ``normalize_values`` the critic learns value targets standardised by the mean and std of every target
+    so far (``value_statistics``), and each snapshot folds those back into the critic's last layer, so the
+    workers' values, and with them GAE and PLR's scores, stay in return units. That rather than SB3's or
+    CleanRL's reward scaling, which divides the rewards themselves and would hand GAE and the teacher values
+    in other units. When the statistics move, the critic's last layer is rescaled so that its predictions stay
+    what they were (PopArt's "preserving outputs precisely", van Hasselt et al. 2016) instead of jumping with
+    them; statistics over all targets, not a decaying average, leave no rate to tune.
     """
 
     def __init__(self, spec: PolicySpec, config: PPOConfig, seed: int) -> None:
@@ -118,11 +126,40 @@ class PPOLearner:
         )
         self.features = ObservationFeatures(spec)
         self.normalizer = RunningNormalizer(spec.feature_dim, clip=config.obs_clip)
+        self.value_statistics = RunningNormalizer(1) if config.normalize_values else None
+        """The running mean and variance of the value targets (only its statistics are used), or None."""
         self.shuffle = torch.Generator().manual_seed(seed)
         self.version = 0
 
     def snapshot(self) -> PolicySnapshot:
-        return capture_snapshot(self.network, self.normalizer, self.version)
+        return capture_snapshot(self.network, self.normalizer, self.version, self.value_scale())
+
+    def value_scale(self) -> tuple[float, float] | None:
+        """The (mean, std) that turn the critic's standardised outputs into values (None: ``normalize_values`` off)."""
+        if self.value_statistics is None:
+            return None
+        return float(self.value_statistics.mean[0]), float(np.sqrt(self.value_statistics.var[0] + NORMALIZER_EPSILON))
+
+    def _fold_in_value_targets(self, returns: torch.Tensor) -> tuple[float, float]:
+        """Add a batch's value targets to the statistics, rescaling the critic's last layer so that its values
+        (mean + std x output) stay what they were; return the new (mean, std). The first batch sets the statistics
+        outright: an untrained critic's outputs are not worth keeping, and kept they would start far off their
+        standardised targets."""
+        assert self.value_statistics is not None
+        before = self.value_scale()
+        first = self.value_statistics.count == 0
+        self.value_statistics.update(returns.numpy()[:, None])
+        after = self.value_scale()
+        assert before is not None and after is not None
+        if first:
+            return after
+        (old_mean, old_std), (new_mean, new_std) = before, after
+        last = self.network.critic[-1]
+        assert isinstance(last, nn.Linear)
+        with torch.no_grad():
+            last.weight.mul_(old_std / new_std)
+            last.bias.mul_(old_std).add_(old_mean - new_mean).div_(new_std)
+        return after
 
     def update(
         self, batches: Sequence[TrajectoryBatch], progress: float = 0.0, max_policy_lag: int = 0
@@ -133,7 +170,8 @@ class PPOLearner:
         ``progress`` in [0, 1] is the share of the step budget already spent (learning-rate annealing).
         Steps the batches mark ``score_only`` are left out, normaliser statistics included (their
         advantages are computed with the rest: no advantage chain crosses an episode's end); where every
-        step is, the policy stays as it was and the losses read NaN.
+        step is, the policy stays as it was and the losses read NaN. A critic that reads the task reads each
+        step's from the batch's ``critic_tasks``.
         """
         accepted = range(self.version - max_policy_lag, self.version + 1)
         stale = sorted({batch.policy_version for batch in batches if batch.policy_version not in accepted})
@@ -154,9 +192,11 @@ class PPOLearner:
         old_values = _flat(b.values for b in batches)
         advantages = _flat(adv for adv, _ in gae)
         returns = _flat(ret for _, ret in gae)
+        tasks_array = _critic_tasks(batches, self.network.spec.critic_task_dim)
         kept = _trained_steps(batches)
         if kept is not None:  # robust PLR: a score-only episode's steps stay out of the update, normaliser included
             raw_observations, actions_array = raw_observations[kept], actions_array[kept]
+            tasks_array = None if tasks_array is None else tasks_array[kept]
             index = torch.from_numpy(kept)
             old_log_probs, old_values = old_log_probs[index], old_values[index]
             advantages, returns = advantages[index], returns[index]
@@ -165,6 +205,7 @@ class PPOLearner:
         inputs = self.normalizer.normalize(features) if normalizes else features.astype(np.float32, copy=False)
         observations = torch.from_numpy(inputs)
         actions = torch.from_numpy(actions_array)
+        critic_tasks = None if tasks_array is None else torch.from_numpy(tasks_array)
 
         size = observations.shape[0]
         stats: dict[str, list[torch.Tensor]] = {
@@ -172,18 +213,24 @@ class PPOLearner:
         }
         if size == 0:  # every step score-only (robust PLR exploring new levels): the policy stays as it was
             return {**{name: float("nan") for name in stats}, "learning_rate": learning_rate}
+        value_targets, value_baseline = returns, old_values  # what the critic's outputs are compared with
+        if self.value_statistics is not None:
+            mean, std = self._fold_in_value_targets(returns)
+            value_targets, value_baseline = (returns - mean) / std, (old_values - mean) / std
         for _ in range(cfg.update_epochs):
             order = torch.randperm(size, generator=self.shuffle)
             for start in range(0, size, cfg.minibatch_size):
                 idx = order[start : start + cfg.minibatch_size]
-                new_log_probs, entropy, new_values = self.network.evaluate(observations[idx], actions[idx])
+                new_log_probs, entropy, new_values = self.network.evaluate(
+                    observations[idx], actions[idx], None if critic_tasks is None else critic_tasks[idx]
+                )
                 losses = ppo_losses(
                     new_log_probs,
                     old_log_probs[idx],
                     advantages[idx],
                     new_values,
-                    old_values[idx],
-                    returns[idx],
+                    value_baseline[idx],
+                    value_targets[idx],
                     entropy,
                     cfg,
                 )
@@ -215,13 +262,16 @@ class PPOLearner:
         return metrics
 
     def state_dict(self) -> dict[str, Any]:
-        return {
+        state = {
             "network": self.network.state_dict(),
             "optimizer": self.optimizer.state_dict(),
-            "normalizer": {name: torch.as_tensor(value) for name, value in vars(self.normalizer.state()).items()},
+            "normalizer": _tensors(self.normalizer),
             "shuffle_rng": self.shuffle.get_state(),
             "version": self.version,
         }
+        if self.value_statistics is not None:
+            state["value_statistics"] = _tensors(self.value_statistics)
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Everything a resumed run continues from; an evaluation-only checkpoint's state, which has no
@@ -236,12 +286,36 @@ class PPOLearner:
         self.shuffle.set_state(state["shuffle_rng"])
 
     def load_policy_state(self, state: dict[str, Any]) -> None:
-        """The policy alone (network, normaliser and version), as evaluation reads it; no optimiser state needed."""
+        """The policy alone (network, normaliser, value statistics and version), as evaluation reads it; no
+        optimiser state needed. A state without value statistics starts them afresh under ``normalize_values``;
+        one with them needs it (its critic's outputs are standardised)."""
+        if "value_statistics" in state and self.value_statistics is None:
+            raise ValueError("this learner state's critic learned standardised values: it needs normalize_values")
         self.network.load_state_dict(state["network"])
-        saved = state["normalizer"]
-        restored = {name: np.asarray(value) for name, value in saved.items()}
-        self.normalizer.load_state(NormalizerState(**restored))  # type: ignore[arg-type]  # count: a 0-d array, used as a float
+        _load(self.normalizer, state["normalizer"])
+        if self.value_statistics is not None and "value_statistics" in state:
+            _load(self.value_statistics, state["value_statistics"])
         self.version = int(state["version"])
+
+
+def _tensors(normalizer: RunningNormalizer) -> dict[str, torch.Tensor]:
+    """A normaliser's statistics as a checkpoint holds them."""
+    return {name: torch.as_tensor(value) for name, value in vars(normalizer.state()).items()}
+
+
+def _load(normalizer: RunningNormalizer, saved: dict[str, Any]) -> None:
+    restored = {name: np.asarray(value) for name, value in saved.items()}
+    normalizer.load_state(NormalizerState(**restored))  # type: ignore[arg-type]  # count: a 0-d array, used as a float
+
+
+def _critic_tasks(batches: Sequence[TrajectoryBatch], width: int) -> np.ndarray | None:
+    """Every step's task inputs, flat (steps, width), for a critic that reads ``width`` of them (else None)."""
+    if not width:
+        return None
+    tasks = [batch.critic_tasks for batch in batches]
+    if any(part is None or part.shape[-1] != width for part in tasks):
+        raise ValueError(f"the critic reads {width} task inputs per step, and a batch carries none or another width")
+    return np.concatenate([part.reshape(-1, width) for part in tasks if part is not None])
 
 
 def _trained_steps(batches: Sequence[TrajectoryBatch]) -> np.ndarray | None:

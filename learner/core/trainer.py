@@ -83,7 +83,7 @@ class Trainer:
         self.teacher_token = teacher_token
         self.actor_name_prefix = actor_name_prefix
         self.task_source = task_source
-        self.learner = PPOLearner(policy_spec_for(config.env, config.ppo), config.ppo, config.seed)
+        self.learner = PPOLearner(policy_spec_for(config.env, config.ppo, config.levels), config.ppo, config.seed)
         self.counters = Counters()
         if resume_from is not None:
             self.learner.load_state_dict(resume_from.learner)
@@ -112,6 +112,7 @@ class Trainer:
             score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
             task_source=self.task_source,
             env_options=self.config.env_options,
+            task_space=self.config.task_space() if self.config.ppo.critic_task_inputs else None,
         )
 
     def run(self, on_iteration: Callable[[IterationReport], None] | None = None) -> Path:
