@@ -22,9 +22,10 @@ from common.kuka.diagnostics import EpisodeDiagnostics
 from common.kuka.task_space import KUKA_HARD_TASK_SPACE, KUKA_HARD_V1_TASK_SPACE, KUKA_TASK_SPACE
 from common.policy.trajectory import EpisodeStats
 from kuka_curriculum import main
-from learner.arguments import UsageError
-from learner.checkpoint_evaluation import EvaluationResult
+from learner.commands.arguments import UsageError
 from learner.core.checkpoint import CHECKPOINT_DIR, latest_checkpoint, load_checkpoint
+from learner.evaluation.checkpoint_evaluation import EvaluationResult
+from learner.evaluation.stats import mean_interval
 from learner.experiments.bakeoff_report import BOOK_RETURNS, results_markdown, teacher_record
 from learner.experiments.bakeoff_runs import (
     Run,
@@ -47,7 +48,6 @@ from learner.experiments.run_archive import (
     resume_files,
     write_up_files,
 )
-from learner.stats import mean_interval
 
 BATCH = 1 * 2 * 128
 TINY = [
@@ -170,6 +170,14 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         assert row in table
     assert "| Scripted controller (no learning) |" in table and "left out" not in table
     assert iio.imread(out / "success_by_placement.png").ndim == 3
+    # The run statistics over seeds, against uniform random by default: one seed each, so no bootstrap bounds.
+    statistics = results["run_statistics"]
+    assert statistics["baseline"] == "random" and list(statistics["arms"]) == ["fixed", "random"]
+    fixed_statistics = statistics["arms"]["fixed"]
+    assert fixed_statistics["scores"] == [results["teachers"][0]["runs"][0]["success_rate"]]
+    assert fixed_statistics["improvement_over_baseline"]["low"] is None
+    assert "## Over seeds, robustly" in table and "P(improvement over Uniform random tasks (`random`))" in table
+    assert iio.imread(out / "performance_profile.png").ndim == 3
 
     # Run again: every run is finished and evaluated, so nothing is trained or evaluated anew.
     untouched = {path: path.stat().st_mtime_ns for path in out.glob("runs/*/*") if path.is_file()}
@@ -183,8 +191,12 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # One teacher gets more seeds; a later report over every teacher keeps them, and only finished ones.
     assert bakeoff("--teachers", "fixed", "--seeds", "2", "--total-steps", str(2 * BATCH)) == 0
     (out / "runs" / "fixed-seed2").mkdir()  # started, never checkpointed: not in the report
-    assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH)) == 0
-    teachers = json.loads((out / "results.json").read_text())["teachers"]
+    # Another baseline is a report setting: the same runs, compared with no curriculum instead.
+    assert bakeoff("--teachers", "fixed", "random", "--total-steps", str(2 * BATCH), "--baseline", "fixed") == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["run_statistics"]["baseline"] == "fixed"
+    assert results["run_statistics"]["arms"]["fixed"]["iqm"]["low"] is not None, "two seeds resample"
+    teachers = results["teachers"]
     assert {entry["teacher"]: [run["seed"] for run in entry["runs"]] for entry in teachers} == {
         "fixed": [0, 1],
         "random": [0],
