@@ -26,10 +26,11 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from common.client.schemas import TEACHER_LABELS  # noqa: E402
 from common.kuka.diagnostics import EpisodeDiagnostics  # noqa: E402
 from learner.evaluation.checkpoint_evaluation import pooled_episodes  # noqa: E402
 from learner.evaluation.episode_diagnostics import band_table, plot_bands  # noqa: E402
-from learner.experiments.bakeoff_report import SCRIPTED_LABEL, TEACHER_LABELS, counted, placement_record  # noqa: E402
+from learner.experiments.bakeoff_report import SCRIPTED_LABEL, counted, placement_record  # noqa: E402
 from learner.experiments.bakeoff_runs import Run  # noqa: E402
 from learner.experiments.run_archive import read_json  # noqa: E402
 
