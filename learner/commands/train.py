@@ -139,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _train(args: argparse.Namespace) -> int:
     from learner.core.checkpoint import latest_checkpoint, load_checkpoint
+    from learner.core.policy import policy_spec_for  # here: it loads torch, which --help does not need
 
     token = token_from_environment()
     checkpoint = None
@@ -159,8 +160,14 @@ def _train(args: argparse.Namespace) -> int:
     try:
         config = _config_from(args, checkpoint.config if checkpoint else DEFAULTS)
         config.family.check(config.env)  # a user's module:EnvId imports, registers and declares a task space
+        policy_spec_for(config.env, config.ppo, config.levels)  # settings the network cannot take (an image's)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if checkpoint is not None and config.ppo.critic_task_inputs != checkpoint.config.ppo.critic_task_inputs:
+        raise UsageError(
+            f"the run in {args.run_dir} has critic_task_inputs={checkpoint.config.ppo.critic_task_inputs}, which "
+            "sizes its critic; it cannot change on --resume"
+        )
     if checkpoint is not None and config.env != checkpoint.config.env:
         raise UsageError(
             f"the run in {args.run_dir} trains on {checkpoint.config.env}; "

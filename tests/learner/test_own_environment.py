@@ -70,3 +70,11 @@ def test_a_kind_that_does_not_fit_the_space_is_refused_with_the_services_message
     env_id = "examples.own_env:GridLevels-v0"
     assert main(["train", "--env", env_id, "--teacher", "covar-gmm", "--run-dir", str(tmp_path / "run")]) == 2
     assert "the covar-gmm teacher takes float parameters only" in capsys.readouterr().err
+
+
+def test_a_setting_the_network_cannot_take_is_one_line_before_anything_starts(tmp_path, capsys) -> None:
+    flags = ["--env", "examples.own_env:GridLevels-v0", "--teacher", "plr", "--ppo", "critic_task_inputs=true"]
+    assert main(["train", *flags, "--run-dir", str(tmp_path / "run")]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "a critic that reads the task needs a flat observation" in error and len(error.splitlines()) == 1
+    assert not (tmp_path / "run").exists()
