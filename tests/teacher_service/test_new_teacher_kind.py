@@ -4,8 +4,6 @@ restores it after a restart."""
 
 from __future__ import annotations
 
-import filecmp
-import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,6 +11,7 @@ import httpx
 import pytest
 
 from teacher_service.process import ServiceProcess
+from tests.package_copies import changed_files, copies_before_and_after
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("common", "teacher_service")
@@ -86,20 +85,6 @@ class ToyTeacher(Teacher):
 '''
 
 
-def changed_files(before: Path, after: Path) -> list[str]:
-    """Paths (relative) that differ between two trees: added, removed or changed files."""
-    found: list[str] = []
-
-    def walk(comparison: filecmp.dircmp[str], prefix: Path) -> None:
-        found.extend(str(prefix / name) for name in comparison.left_only + comparison.right_only)
-        found.extend(str(prefix / name) for name in comparison.diff_files)
-        for name, sub in comparison.subdirs.items():
-            walk(sub, prefix / name)
-
-    walk(filecmp.dircmp(before, after, ignore=["__pycache__"]), Path())
-    return sorted(found)
-
-
 def add_toy_kind(tree: Path) -> None:
     (tree / TOY_MODULE).write_text(TOY_SOURCE)
     registry = tree / REGISTRY
@@ -116,12 +101,7 @@ def add_toy_kind(tree: Path) -> None:
 @pytest.fixture(scope="module")
 def trees(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     before, after = tmp_path_factory.mktemp("before"), tmp_path_factory.mktemp("after")
-    for tree in (before, after):
-        for package in PACKAGES:
-            shutil.copytree(ROOT / package, tree / package, ignore=shutil.ignore_patterns("__pycache__"))
-        shutil.copy(ROOT / "kuka_curriculum.py", tree / "kuka_curriculum.py")
-    add_toy_kind(after)
-    return before, after
+    return copies_before_and_after(before, after, PACKAGES, add_toy_kind)
 
 
 def test_a_new_kind_is_its_module_and_the_registry(trees: tuple[Path, Path]) -> None:

@@ -5,14 +5,13 @@ the checkpoint, with no other file touched."""
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from tests.teacher_service.test_new_teacher_kind import changed_files
+from tests.package_copies import changed_files, copies_before_and_after
 
 ROOT = Path(__file__).resolve().parents[3]
 PACKAGES = ("common", "teacher_service", "rollout_worker", "learner")
@@ -85,12 +84,7 @@ def add_toy_family(tree: Path) -> None:
 @pytest.fixture(scope="module")
 def trees(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     before, after = tmp_path_factory.mktemp("before"), tmp_path_factory.mktemp("after")
-    for tree in (before, after):
-        for package in PACKAGES:
-            shutil.copytree(ROOT / package, tree / package, ignore=shutil.ignore_patterns("__pycache__"))
-        shutil.copy(ROOT / "kuka_curriculum.py", tree / "kuka_curriculum.py")
-    add_toy_family(after)
-    return before, after
+    return copies_before_and_after(before, after, PACKAGES, add_toy_family)
 
 
 def test_a_new_family_is_its_module_and_the_registry(trees: tuple[Path, Path]) -> None:
@@ -104,26 +98,18 @@ def test_the_copy_trains_and_evaluates_on_the_new_family(trees: tuple[Path, Path
     _, after = trees
     env = {**os.environ, "PYTHONPATH": str(after), "PYTHONSAFEPATH": "1"}
     command = [sys.executable, "-c", "import sys, kuka_curriculum; sys.exit(kuka_curriculum.main(sys.argv[1:]))"]
-    run_dir = tmp_path / "toy-run"
+
+    def kuka_curriculum(*args: str) -> subprocess.CompletedProcess[str]:
+        """The copy's command, run beside the run directory with only the copy's packages on the path."""
+        done = subprocess.run([*command, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return done
+
+    run_dir = str(tmp_path / "toy-run")
     flags = ["--workers", "1", "--envs-per-worker", "2", "--rollout-length", "64", "--eval-every", "1"]
-    trained = subprocess.run(
-        [*command, "train", "--env", "Toy-v0", "--teacher", "random", "--total-steps", "256", "--run-dir", str(run_dir)]
-        + flags,
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
+    trained = kuka_curriculum(
+        "train", "--env", "Toy-v0", "--teacher", "random", "--total-steps", "256", "--run-dir", run_dir, *flags
     )
-    assert trained.returncode == 0, trained.stderr[-3000:]
     assert "final checkpoint:" in trained.stdout
-    evaluated = subprocess.run(
-        [*command, "evaluate", str(run_dir), "--episodes", "4", "--processes", "1"],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert evaluated.returncode == 0, evaluated.stderr[-3000:]
+    evaluated = kuka_curriculum("evaluate", run_dir, "--episodes", "4", "--processes", "1")
     assert "Toy-v0, hardest task, 4 episodes" in evaluated.stdout
