@@ -39,10 +39,16 @@ among the top K (``top_k`` restricts to the K best), and replays are tasks from 
 
 Over levels (an all-integer space of at most ``MAX_LEVELS`` levels) the estimate needs no
 neighbours: every refresh scores every level from its own held results, p = (its successes +
-prior_weight * prior_success) / (its results + prior_weight), so a level not played lately sits at the
-prior; ``pool_size``, ``replay_share`` and ``neighbours`` play no part. A fresh draw is a uniform
-level. This is SFL's p(1 - p) per level with p from the training episodes rather than from extra
-rollouts, and Syllabus's ``Learnability`` with its top-K and uniform mix (``top_k``, ``fresh_share``).
+prior_weight * prior_success) / (its results + prior_weight); ``pool_size``, ``replay_share`` and
+``neighbours`` play no part. A level without held results has no estimate and learnability 0: it is
+reached through the fresh share, a uniform level, as SFL weighs by learnability only the levels it has
+rolled out. (Scored at the prior instead, p = 0.5 would make every unplayed level the most learnable
+there is, and the top-K draw a sweep of the levels played least lately.) The prior still pulls a level
+with few results toward 0.5: before any success, a level failed once scores above one failed ten times;
+``prior_weight`` 0 is SFL's plain success rate, which scores 0 everywhere until a level has both
+outcomes, and then draws uniformly. This is SFL's p(1 - p) per level with p from the training episodes
+rather than from extra rollouts, and Syllabus's ``Learnability`` with its top-K and uniform mix
+(``top_k``, ``fresh_share``).
 
 When it helps: students whose outcome is mostly solved-or-not per task, such as grasping, where
 the frontier between solved and unsolved tasks is where learning happens. When it fails: a task's
@@ -201,7 +207,8 @@ class LearnabilityTeacher(Teacher):
         successes = np.bincount(played, weights=outcomes, minlength=self._levels)
         params = self.params
         self._pool = self._level_units.copy()
-        self._success = (successes + params.prior_weight * params.prior_success) / (results + params.prior_weight)
+        estimate = (successes + params.prior_weight * params.prior_success) / (results + params.prior_weight)
+        self._success = np.where(results > 0, estimate, UNKNOWN_SUCCESS)
         self._refresh_choice()
 
     def _refresh(self) -> None:
@@ -227,8 +234,13 @@ class LearnabilityTeacher(Teacher):
         self._success = (outcomes[nearest].sum(axis=1) + prior) / (neighbours + params.prior_weight)
         self._refresh_choice()
 
+    def _learnability(self) -> np.ndarray:
+        """p(1 - p) of each candidate; 0 for a level without results (``UNKNOWN_SUCCESS``)."""
+        scores: np.ndarray = np.where(self._success >= 0.0, self._success * (1.0 - self._success), 0.0)
+        return scores
+
     def _refresh_choice(self) -> None:
-        scores = self._success * (1.0 - self._success)
+        scores = self._learnability()
         if self.params.top_k is not None and self.params.top_k < len(scores):
             # Stable order, so ties at the cut keep the earlier candidates on every machine.
             kept = np.argsort(-scores, kind="stable")[: self.params.top_k]
@@ -260,7 +272,7 @@ class LearnabilityTeacher(Teacher):
         self._refresh_choice()
 
     def _describe(self) -> dict[str, Any]:
-        learnability = self._success * (1.0 - self._success)
+        learnability = self._learnability()
         chance = np.diff(self._cdf, prepend=0.0) if len(self._cdf) else self._cdf
         if self._levels:
             return {"refreshes": self.refreshes, "return_bar": self._bar, **self._level_table(learnability, chance)}
@@ -280,12 +292,9 @@ class LearnabilityTeacher(Teacher):
         probability = np.full(self._levels, fresh / self._levels)
         if len(chance):
             probability += chance * (1.0 - fresh)
-        unknown = np.full(self._levels, np.nan)  # no estimate before the first refresh
-        return level_table(
-            self.space,
-            probability,
-            {
-                "success": self._success if len(self._success) else unknown,
-                "learnability": learnability if len(learnability) else unknown,
-            },
-        )
+        if len(self._success):
+            known = self._success >= 0.0  # a level without held results has no estimate
+            success, learnability = np.where(known, self._success, np.nan), np.where(known, learnability, np.nan)
+        else:  # no estimate before the first refresh
+            success = learnability = np.full(self._levels, np.nan)
+        return level_table(self.space, probability, {"success": success, "learnability": learnability})

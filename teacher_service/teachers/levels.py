@@ -97,11 +97,12 @@ class PlrParams(TeacherParams):
     staleness_coef: float = Field(default=0.1, ge=0.0, le=1.0)
     """ρ: the share of a replay drawn by staleness (draws since the level was last drawn) rather
     than by score, so old scores get refreshed."""
-    replay_prob: float = Field(default=0.5, ge=0.0, le=1.0)
-    """While some level has no score yet, a draw replays with probability replay_prob (``fixed``)
-    or min(share of levels scored, replay_prob) (``proportionate``). Once every level has one, PLR
-    replays with replay_prob and draws the rest uniformly over all levels, as Syllabus's TaskSampler
-    does (the authors' code always replays then: set 1.0); robust PLR always replays then."""
+    replay_prob: float | None = Field(default=None, ge=0.0, le=1.0)
+    """Once replays have begun, the chance a draw replays (``fixed``), or its cap (``proportionate``: the
+    share of levels scored). Null means 1.0 for PLR, so that after its sweep every draw replays, as the
+    authors' code and Syllabus do, and 0.5 for robust PLR (DCD's). Below 1, PLR keeps drawing the rest
+    uniformly over all levels once every level has a score: our hybrid, which neither paper describes
+    (curricula stored before this default hold 0.5, and keep it); robust PLR always replays then."""
     replay_schedule: Literal["proportionate", "fixed"] | None = None
     """How the replay probability grows (see ``replay_prob``); null means ``proportionate`` (the
     authors' default) for PLR and ``fixed`` for robust PLR, which trains on replays alone and would
@@ -119,19 +120,20 @@ class PlrParams(TeacherParams):
 class PlrTeacher(_LevelTeacher):
     """Prioritized Level Replay over the levels of an integer space.
 
-    Each result scores its level: the result's ``score`` when the learner sends one (PLR's positive
-    value loss, the mean over the episode's steps of max(GAE advantage, 0), is the paper's best; MaxMC
-    or any other regret estimate works the same way), else the L1 gap between the episode's return
-    and the level's previous return (the mean previous return over scored levels for a level's first
-    result): a value error with the level's last return standing in for a critic.
+    Each result scores its level: the result's ``score`` when the learner sends one (the rollout workers
+    send ``value_l1``, the mean absolute GAE advantage over the episode, the PLR paper's and Syllabus's
+    example's score, or ``positive_value_loss``, the mean of max(GAE advantage, 0), robust PLR's: the
+    trainer's ``PPOConfig.level_score`` picks), else the L1 gap between the episode's return and the
+    level's previous return (the mean previous return over scored levels for a level's first result): a
+    value error with the level's last return standing in for a critic.
 
-    Departures from the authors' code (``facebookresearch/level-replay``) and Syllabus 0.7: draws
-    are indexed by task number, not a global generator; ties in rank go to the lower level number;
-    ranks are taken among scored levels only (the authors rank every level and zero the unscored);
-    scores arrive per episode, not accumulated over a rollout's partial episodes; robust PLR plays
-    its new levels on the training workers with ``score_only`` set, instead of on separate
-    evaluation workers. Once every level has a score, PLR keeps drawing ``1 - replay_prob`` of its
-    levels uniformly, as Syllabus's replay decision does, where the authors' code always replays.
+    At its defaults PLR sweeps every level once and then only replays, as the authors' code and Syllabus's
+    ``TaskSampler`` do; ``replay_prob`` below 1 gives our hybrid (see it). Departures from the authors'
+    code (``facebookresearch/level-replay``) and Syllabus 0.7: draws are indexed by task number, not a
+    global generator; ties in rank go to the lower level number; ranks are taken among scored levels only
+    (the authors rank every level and zero the unscored); scores arrive per episode, not accumulated over
+    a rollout's partial episodes; robust PLR plays its new levels on the training workers with
+    ``score_only`` set, instead of on separate evaluation workers.
     """
 
     kind = "plr"
@@ -145,11 +147,12 @@ class PlrTeacher(_LevelTeacher):
         p = self.params
         schedule = p.replay_schedule or ("fixed" if p.robust else "proportionate")
         min_seen_share = p.min_seen_share if p.min_seen_share is not None else (0.0 if p.robust else 1.0)
+        replay_prob = p.replay_prob if p.replay_prob is not None else (0.5 if p.robust else 1.0)
         self.sampler = LevelReplay(
             space.level_count(),
             p.temperature,
             p.staleness_coef,
-            p.replay_prob,
+            replay_prob,
             min_seen_share,
             schedule,
             replay_when_all_scored=p.robust,

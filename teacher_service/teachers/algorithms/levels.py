@@ -47,9 +47,10 @@ class LevelReplay:
     ``min_seen_share`` of the levels has a score, a draw replays with probability
     ``min(seen share, replay_prob)`` (the authors' ``proportionate`` schedule) or ``replay_prob``
     (``fixed``). Once every level has one, a draw replays with ``replay_prob`` and otherwise picks a
-    level uniformly among all, as Syllabus's ``TaskSampler`` decides (the authors' code always replays
-    then, which ``replay_prob`` 1 gives); with ``replay_when_all_scored`` it always replays (robust
-    PLR, whose uniform draws would be scoring only). A replay picks among the scored levels from the mixture
+    level uniformly among all: at ``replay_prob`` 1 every draw replays then, as in the authors' code and
+    Syllabus's ``TaskSampler`` (which sends its non-replay draws to an evaluator, not to training); below
+    1 it is our hybrid. With ``replay_when_all_scored`` it always replays then (robust PLR, whose uniform
+    draws would be scoring only). A replay picks among the scored levels from the mixture
     ``(1 - staleness_coef) * P_S + staleness_coef * P_C``: ``P_S`` by rank of score with
     ``temperature``, ``P_C`` in proportion to the draws since the level was last drawn (staleness).
     An exploring draw picks uniformly among the levels without a score (among all once each has one).
