@@ -3,8 +3,8 @@
 Knows nothing of Ray or HTTP: tasks come from, and finished episodes go to, any ``TaskSource``.
 Episodes run across ``sample`` calls, so a batch boundary never cuts an episode short. Actions are a
 box's (clipped into it) or a ``Discrete`` space's (a categorical policy's indices). Given the PPO
-config's discount (``ScoreDiscount``), each finished episode carries its score, PLR's positive value
-loss, computed here from the rewards and the values the policy predicted as it acted, since only the
+config's discount (``ScoreDiscount``), each finished episode carries its score (robust PLR's positive value
+loss or the PLR paper's ``value_l1``), computed here from its rewards and predicted values, since only the
 worker sees whole episodes; and an episode whose task is score-only has its steps marked in the batch,
 for the learner to leave out. Given the run's task space, it feeds a critic that reads the task
 (``PolicySpec.critic_task_dim``) each environment's current task, scaled to [0, 1], and the batch carries
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, cast
+from typing import Any, Literal, Protocol, cast
 
 import gymnasium as gym
 import numpy as np
@@ -37,12 +37,21 @@ class TaskSource(Protocol):
     def report(self, episode: EpisodeStats) -> None: ...
 
 
+EpisodeScore = Literal["positive_value_loss", "value_l1"]
+
+
 @dataclass(frozen=True)
 class ScoreDiscount:
-    """The discount and GAE lambda of the learner's PPO config, with which episodes are scored."""
+    """How episodes are scored: the discount and GAE lambda of the learner's PPO config, and which score
+    (``EPISODE_SCORES``; ``PPOConfig.level_score``)."""
 
     gamma: float
     gae_lambda: float
+    score: EpisodeScore = "positive_value_loss"
+
+    def __post_init__(self) -> None:
+        if self.score not in EPISODE_SCORES:
+            raise ValueError(f"score must be one of {', '.join(EPISODE_SCORES)}, got {self.score!r}")
 
 
 SCORE_BLOCK = 128
@@ -69,14 +78,30 @@ def discounted_suffix_sums(values: np.ndarray, discount: float) -> np.ndarray:
     return out
 
 
-def positive_value_loss(rewards: np.ndarray, values: np.ndarray, bootstrap: float, discount: ScoreDiscount) -> float:
-    """One whole episode's score: the mean over its steps of max(GAE advantage, 0), with ``bootstrap`` the
-    value after its last step (0 when it terminated, V of its last observation when it was cut short)."""
+def episode_advantages(
+    rewards: np.ndarray, values: np.ndarray, bootstrap: float, discount: ScoreDiscount
+) -> np.ndarray:
+    """One whole episode's GAE advantages, with ``bootstrap`` the value after its last step (0 when it
+    terminated, V of its last observation when it was cut short)."""
     values = values.astype(np.float64)
     next_values = np.append(values[1:], bootstrap)
     deltas = rewards.astype(np.float64) + discount.gamma * next_values - values
-    advantages = discounted_suffix_sums(deltas, discount.gamma * discount.gae_lambda)
-    return float(np.maximum(advantages, 0.0).mean())
+    return discounted_suffix_sums(deltas, discount.gamma * discount.gae_lambda)
+
+
+def positive_value_loss(rewards: np.ndarray, values: np.ndarray, bootstrap: float, discount: ScoreDiscount) -> float:
+    """The mean over the episode's steps of max(GAE advantage, 0): robust PLR's score (Jiang et al. 2021b)."""
+    return float(np.maximum(episode_advantages(rewards, values, bootstrap, discount), 0.0).mean())
+
+
+def value_l1(rewards: np.ndarray, values: np.ndarray, bootstrap: float, discount: ScoreDiscount) -> float:
+    """The mean over the episode's steps of |GAE advantage|: the PLR paper's score (Jiang et al. 2021a), and
+    the strategy of Syllabus's PLR example."""
+    return float(np.abs(episode_advantages(rewards, values, bootstrap, discount)).mean())
+
+
+EPISODE_SCORES = {"positive_value_loss": positive_value_loss, "value_l1": value_l1}
+"""The scores a worker can send, by name: ``ScoreDiscount.score`` picks one."""
 
 
 class Sampler:
@@ -228,14 +253,15 @@ class Sampler:
     def _score(
         self, index: int, rewards: np.ndarray, values: np.ndarray, start: int, step: int, bootstrap: float
     ) -> float:
-        """The positive value loss of the episode that environment ``index`` ended at ``step``: its steps in
-        earlier batches and this one's from ``start``; ``bootstrap`` is 0 unless it was cut short."""
+        """The score of the episode that environment ``index`` ended at ``step``: its steps in earlier batches
+        and this one's from ``start``; ``bootstrap`` is 0 unless it was cut short."""
         assert self.score_discount is not None
         earlier_rewards, earlier_values = self._carried[index]
         self._carried[index] = _NOTHING_CARRIED
         episode_rewards = np.concatenate([earlier_rewards, rewards[start : step + 1, index]])
         episode_values = np.concatenate([earlier_values, values[start : step + 1, index]])
-        return positive_value_loss(episode_rewards, episode_values, float(bootstrap), self.score_discount)
+        score = EPISODE_SCORES[self.score_discount.score]
+        return score(episode_rewards, episode_values, float(bootstrap), self.score_discount)
 
     def _carry(self, index: int, rewards: np.ndarray, values: np.ndarray, start: int) -> None:
         """Keep the unfinished episode's steps of this batch, from ``start``, for its score."""

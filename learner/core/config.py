@@ -25,6 +25,12 @@ if TYPE_CHECKING:
     from common.client.schemas import TeacherKind
 
 
+LevelScore = Literal["positive_value_loss", "value_l1"]
+LEVEL_SCORES: tuple[LevelScore, ...] = ("positive_value_loss", "value_l1")
+"""The episode scores the rollout workers can send a level teacher (``rollout_worker.sampler.EPISODE_SCORES``):
+the mean of max(GAE advantage, 0), robust PLR's, and the mean of |GAE advantage|, the PLR paper's."""
+
+
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO's hyperparameters. Finished episodes per update are about batch / episode length (5 at the
@@ -82,6 +88,8 @@ class PPOConfig:
     """Feed the block's yaw as (sin 2a, cos 2a): a block turned half a turn is the same, so the wrist can turn less."""
     critic_task_inputs: bool = False
     """The critic also reads the episode's task, each parameter in [0, 1]; the actor, deployed, does not."""
+    level_score: LevelScore = "positive_value_loss"
+    """Each episode's score for its teacher (PLR ranks by it): positive_value_loss, robust PLR's, or value_l1, PLR's."""
     obs_clip: float = 10.0
     """Normalised observations are clipped to +-this."""
     torch_threads: int = 1
@@ -106,6 +114,10 @@ class PPOConfig:
         _require(self.angle_features or not self.half_turn_block_yaw, "half_turn_block_yaw needs angle_features")
         for name in ("normalize_values", "critic_task_inputs"):
             _require(isinstance(getattr(self, name), bool), f"{name} must be true or false")
+        _require(
+            self.level_score in LEVEL_SCORES,
+            f"level_score must be one of {', '.join(LEVEL_SCORES)}, got {self.level_score!r}",
+        )
 
     def with_overrides(self, values: Mapping[str, Any]) -> PPOConfig:
         """This config with some fields replaced by values from the command line or JSON, checked by
@@ -121,6 +133,8 @@ class PPOConfig:
                 fits = all(isinstance(width, int) and not isinstance(width, bool) for width in value)
             elif isinstance(current, bool):
                 fits = isinstance(value, bool)
+            elif isinstance(current, str):
+                fits = isinstance(value, str)
             elif isinstance(current, int):
                 fits = isinstance(value, int) and not isinstance(value, bool)
             else:  # floats, and the float-or-None ones

@@ -109,7 +109,9 @@ class Trainer:
             max_episode_steps=self.config.max_episode_steps,
             teacher_token=self.teacher_token,
             env_id=self.config.env,
-            score_discount=ScoreDiscount(self.config.ppo.gamma, self.config.ppo.gae_lambda),
+            score_discount=ScoreDiscount(
+                self.config.ppo.gamma, self.config.ppo.gae_lambda, self.config.ppo.level_score
+            ),
             task_source=self.task_source,
             env_options=self.config.env_options,
             task_space=self.config.task_space() if self.config.ppo.critic_task_inputs else None,
