@@ -27,6 +27,12 @@ left to reach its budget. Then:
 - no role needed a hand: every fault's role came back without the bench doing more than the fault
   itself, and at the end every service is up (the learner exited 0).
 
+With ``--schedule`` the faults are not drawn but given, in order (``teacher:kill,disk-full,...``: a
+role and a fault, or the full disk in its place), and each one waits until the stack is ready for it:
+``--fault-every`` seconds since the last, the last fault's role back, and the learner
+``--steps-between`` steps past where it stood at the last one; so every fault lands on a stack that
+trains, whatever the machine's speed (tests/test_chaos_stack.py runs its faults this way).
+
 Prints a table (faults by role, time until the role answered again and until training got past the
 step it was at, steps lost at each learner death, results lost and duplicated, 5xx the workers saw)
 and writes everything to ``--out``. Needs root (the loop mount), ``docker``, ``docker-compose``.
@@ -102,9 +108,10 @@ def utc(text: str) -> float:
 class Stack:
     """The compose project, its containers by role, and the folders on this machine that it writes."""
 
-    def __init__(self, scratch: Path, project: str, settings: dict[str, str], volume_mb: int, run_name: str) -> None:
+    def __init__(self, scratch: Path, project: str, volume_mb: int) -> None:
         self.scratch = scratch
-        self.run_name = run_name
+        self.run_name = ""
+        """The training run the stack's learner runs: ``start_run`` sets it."""
         self.project = project
         self.data = scratch / "teacher-data"
         self.runs = scratch / "runs"
@@ -113,7 +120,7 @@ class Stack:
         self.env_file = scratch / "stack.env"
         self.override = scratch / "chaos.override.yml"
         self.volume_mb = volume_mb
-        self.env_file.write_text("".join(f"{name}={value}\n" for name, value in settings.items()))
+        self.env_file.touch()
         self.mounted = False
 
     def prepare(self) -> None:
@@ -143,10 +150,25 @@ class Stack:
             )
         )
 
+    def compose_files(self) -> list[Path]:
+        return [ROOT / "docker-compose.yml", self.override]
+
+    def compose_environment(self) -> dict[str, str] | None:
+        """The environment ``docker-compose`` runs in; None: this process's."""
+        return None
+
     def compose(self, *arguments: str, timeout: float = 300.0) -> str:
-        files = ["--file", str(ROOT / "docker-compose.yml"), "--file", str(self.override)]
+        files = [argument for path in self.compose_files() for argument in ("--file", str(path))]
         command = ["docker-compose", "--project-name", self.project, "--project-directory", str(ROOT), *files]
-        return run([*command, "--env-file", str(self.env_file), *arguments], timeout=timeout)
+        command += ["--env-file", str(self.env_file), *arguments]
+        return run(command, timeout=timeout, env=self.compose_environment())
+
+    def start_run(self, settings: dict[str, str]) -> None:
+        """``up`` with ``settings`` as the env file: on a stack already up, compose recreates only the services
+        whose settings changed (the learner alone, for a run with another seed or budget)."""
+        self.env_file.write_text("".join(f"{name}={value}\n" for name, value in settings.items()))
+        self.run_name = f"{settings['TEACHER']}-seed{settings['SEED']}"
+        self.compose("up", "--detach", "--no-build", "--scale", "ray-worker=2", timeout=600)
 
     def containers(self, service: str) -> list[str]:
         labels = [f"label=com.docker.compose.project={self.project}", f"label=com.docker.compose.service={service}"]
@@ -307,11 +329,12 @@ def role_is_back(stack: Stack, fault: Fault) -> bool:
     return True
 
 
-def watch_recovery(stack: Stack, observer: Observer, fault: Fault) -> None:
-    """Fill in ``back_s``, ``progress_regained_s`` and the restarts it caused, polling once a second."""
+def watch_recovery(stack: Stack, observer: Observer, fault: Fault, aftermath_s: float = AFTERMATH_S) -> None:
+    """Fill in ``back_s``, ``progress_regained_s`` and the restarts it caused in the ``aftermath_s`` seconds
+    after it, polling once a second."""
     then = observer.latest()
     deadline = fault.started + RECOVERY_TIMEOUT_S
-    aftermath = fault.started + AFTERMATH_S
+    aftermath = fault.started + aftermath_s
     while time.time() < deadline and (
         fault.back_s is None or fault.progress_regained_s is None or time.time() < aftermath
     ):
@@ -324,7 +347,7 @@ def watch_recovery(stack: Stack, observer: Observer, fault: Fault) -> None:
             with contextlib.suppress(Exception):
                 if role_is_back(stack, fault):
                     fault.back_s = now - fault.started
-        if fault.progress_regained_s is None and now_s_past(fault, AFTERMATH_S) and learner_finished(stack):
+        if fault.progress_regained_s is None and now_s_past(fault, aftermath_s) and learner_finished(stack):
             break  # the run ended before it got past that step again (a fault near its end)
         if fault.progress_regained_s is None:
             records = metrics(stack, stack.run_name)
@@ -418,18 +441,26 @@ class DiskFull:
     at_s: float = 0.0
     for_s: float = 0.0
     bytes_free_when_full: int = -1
+    held_s: float = 0.0
+    """How long it was full: ``for_s``, or less when freed after enough refusals."""
     probes: list[dict[str, Any]] = field(default_factory=list)
     health: list[dict[str, Any]] = field(default_factory=list)
     ok_again_after_free_s: float | None = None
     write_ok_after_free_s: float | None = None
 
 
-def disk_full_period(stack: Stack, curriculum: str, disk: DiskFull, hold_s: float) -> None:
-    """Fill the teacher's file system, probe writes and health while full, free it, time the recovery."""
+def disk_full_period(stack: Stack, curriculum: str, disk: DiskFull, hold_s: float, refusals: int = 0) -> None:
+    """Fill the teacher's file system, probe writes and health while full, free it, time the recovery.
+
+    Held ``hold_s`` seconds, or only until ``refusals`` probes were refused with a 503 when that is given
+    (the service takes writes for a while after the fill, until its database needs a page the disk lacks).
+    """
     started = time.time()
     disk.bytes_free_when_full = fill(stack.data)
     tasks_url = f"{TEACHER_URL}/api/v1/curricula/{curriculum}/tasks"
     while time.time() < started + hold_s:
+        if refusals and sum(probe["status"] == 503 for probe in disk.probes) >= refusals:
+            break
         status, body, seconds = http("POST", tasks_url, {"count": 1}, timeout=15)
         detail = body.get("detail") if isinstance(body, dict) else body
         disk.probes.append({"t": time.time() - started, "status": status, "seconds": seconds, "detail": detail})
@@ -438,6 +469,7 @@ def disk_full_period(stack: Stack, curriculum: str, disk: DiskFull, hold_s: floa
         time.sleep(1.0)
     (stack.data / FILLER).unlink()
     freed = time.time()
+    disk.held_s = freed - started
     while time.time() < freed + 300 and (disk.ok_again_after_free_s is None or disk.write_ok_after_free_s is None):
         h_status, h_body, _ = http("GET", f"{TEACHER_URL}/healthz", timeout=15)
         healthy = h_status == 200 and isinstance(h_body, dict) and h_body.get("status") == "ok"
@@ -621,26 +653,64 @@ def summary(values: list[float]) -> dict[str, float | None]:
 
 # --- the run -----------------------------------------------------------------------------------------
 
+DISK_FULL = "disk-full"
+"""The schedule's entry for the full disk."""
+QUIET_BEFORE_DISK_S, QUIET_AFTER_DISK_S = 5.0, 15.0
+"""No fault this close to the full disk, so that what the writes get is the disk's doing."""
 
-def main(argv: list[str] | None = None) -> int:
+
+def parse_schedule(text: str) -> list[tuple[str, str]]:
+    """``--schedule``: comma-separated ``role:kind`` entries and ``disk-full``, as (role, kind) pairs."""
+    entries = []
+    for entry in text.split(","):
+        role, _, kind = entry.strip().partition(":")
+        if role == DISK_FULL and not kind:
+            entries.append((DISK_FULL, ""))
+        elif role in ROLES and kind in KINDS:
+            entries.append((role, kind))
+        else:
+            raise argparse.ArgumentTypeError(
+                f"{entry!r} is neither {DISK_FULL} nor role:kind (roles {', '.join(ROLES)}; kinds {', '.join(KINDS)})"
+            )
+    return entries
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=1800.0, help="seconds of faults, from the first iteration")
     parser.add_argument("--fault-every", type=float, default=60.0)
     parser.add_argument("--seed", type=int, default=0, help="the killer's")
     parser.add_argument("--steps", type=int, default=2_000_000, help="the run's step budget")
+    parser.add_argument("--run-seed", type=int, default=0, help="the training run's seed: its run is alp-gmm-seed<N>")
     parser.add_argument("--disk-full-at", type=float, help="seconds into the faults (default: a third of the way)")
     parser.add_argument("--disk-full-for", type=float, default=120.0)
+    parser.add_argument(
+        "--disk-full-refusals", type=int, default=0, help="free the disk once this many probes got a 503 (0: hold it)"
+    )
     parser.add_argument("--volume-mb", type=int, default=512, help="the teacher's file system")
     parser.add_argument("--min-faults", type=int, default=20, help="faults that must be done for a pass")
+    parser.add_argument(
+        "--schedule",
+        type=parse_schedule,
+        help="the faults in this order instead of drawn for --duration: role:kind or disk-full, comma-separated",
+    )
+    parser.add_argument(
+        "--steps-between", type=int, default=8192, help="with --schedule: steps trained from one fault to the next"
+    )
+    parser.add_argument(
+        "--aftermath", type=float, default=AFTERMATH_S, help="seconds after a fault in which restarts count as its own"
+    )
     parser.add_argument("--start-timeout", type=float, default=600.0, help="from `up` to the first iteration")
     parser.add_argument("--finish-timeout", type=float, default=1800.0, help="after the faults, for the budget")
     parser.add_argument("--project", default="kcchaos", help="the compose project name")
     parser.add_argument("--out", type=Path, help="write the results here as JSON")
     parser.add_argument("--artifacts", type=Path, help="keep the logs, the timeline and the database copy here")
-    args = parser.parse_args(argv)
-    disk_full_at = args.duration / 3 if args.disk_full_at is None else args.disk_full_at
+    return parser.parse_args(argv)
 
-    settings = {
+
+def run_settings(args: argparse.Namespace) -> dict[str, str]:
+    """The stack's settings (its env file) for the run ``args`` ask for."""
+    return {
         "KC_TEACHER_TOKEN": TOKEN,
         "TEACHER": "alp-gmm",
         "KUKA_ENV": "KukaGrasp-v0",
@@ -648,31 +718,158 @@ def main(argv: list[str] | None = None) -> int:
         "ROLLOUT_WORKERS": "2",
         "ENVS_PER_WORKER": "4",
         "RAY_WORKER_CPUS": "2",
-        "SEED": "0",
+        "SEED": str(args.run_seed),
         "TRAIN_ARGS": TRAIN_ARGS,
     }
-    run_name = "alp-gmm-seed0"
+
+
+@dataclass
+class Killer:
+    """Does the run's faults and starts a thread that watches each one's recovery."""
+
+    stack: Stack
+    observer: Observer
+    aftermath_s: float
+    started: float
+    """When the learner's first iteration was seen: fault times count from it."""
+    faults: list[Fault] = field(default_factory=list)
+    watchers: list[threading.Thread] = field(default_factory=list)
+
+    def now_s(self) -> float:
+        return time.time() - self.started
+
+    def fault(self, role: str, kind: str, pick: random.Random, skip: str = "") -> Fault:
+        """One fault, or one recorded as skipped for ``skip``; ``pick`` chooses among a role's replicas."""
+        fault = Fault(at_s=self.now_s(), role=role, kind=kind)
+        if skip:
+            fault.note = skip
+        elif fault.role == "learner" and learner_finished(self.stack):
+            fault.note = "skipped: the learner has finished its run"
+        else:
+            records = metrics(self.stack, self.stack.run_name)
+            fault.step_before = records[-1]["step"] if records else 0
+            try:
+                inject(self.stack, fault, pick)
+            except Exception as error:  # a fault the bench could not do is recorded, not fatal
+                fault.note = f"{type(error).__name__}: {error}"
+            if fault.done:
+                watcher = threading.Thread(
+                    target=watch_recovery, args=(self.stack, self.observer, fault, self.aftermath_s), daemon=True
+                )
+                watcher.start()
+                self.watchers.append(watcher)
+        self.faults.append(fault)
+        print(f"{fault.at_s:6.0f} s  {fault.kind:7} {fault.role:10} {'done' if fault.done else fault.note}",
+              flush=True)  # fmt: skip
+        return fault
+
+
+def drawn_faults(killer: Killer, args: argparse.Namespace, disk: DiskFull, rng: random.Random) -> None:
+    """Every ``--fault-every`` s for ``--duration`` s a role and a fault drawn at random; the disk full once."""
+    disk_thread = threading.Thread(
+        target=disk_full_period,
+        args=(killer.stack, killer.stack.run_name, disk, args.disk_full_for, args.disk_full_refusals),
+        daemon=True,
+    )
+    disk_started = False
+    quiet_from, quiet_to = disk.at_s - QUIET_BEFORE_DISK_S, disk.at_s + args.disk_full_for + QUIET_AFTER_DISK_S
+    next_fault = args.fault_every
+    while True:
+        now_s = killer.now_s()
+        if not disk_started and now_s >= disk.at_s:
+            disk_thread.start()
+            disk_started = True
+            print(f"{now_s:6.0f} s  disk full for {args.disk_full_for:.0f} s", flush=True)
+        if next_fault > args.duration:
+            break
+        if now_s >= next_fault:
+            role, kind = rng.choice(ROLES), rng.choice(KINDS)
+            pick = random.Random(rng.random())  # which replica: drawn whether or not it is used
+            killer.fault(role, kind, pick, skip="skipped: the disk is full" if quiet_from <= now_s <= quiet_to else "")
+            next_fault += args.fault_every
+        time.sleep(0.5)
+    if disk_started:
+        disk_thread.join()
+
+
+def ready_for_next(stack: Stack, previous: Fault | None, step: int) -> bool:
+    """The last fault's role is back and the learner has logged ``step`` (or has finished its run)."""
+    if previous is not None and previous.done and previous.back_s is None:
+        return False
+    if learner_finished(stack):
+        return True
+    records = metrics(stack, stack.run_name)
+    return bool(records) and records[-1]["step"] >= step
+
+
+def scheduled_faults(killer: Killer, args: argparse.Namespace, disk: DiskFull, rng: random.Random) -> None:
+    """``--schedule``'s entries in order, each once ``ready_for_next`` and ``--fault-every`` s after the last;
+    a wait for a role that never comes back ends after ``RECOVERY_TIMEOUT_S`` (its fault then fails the run)."""
+    previous: Fault | None = None
+    not_before = time.time()
+    step_then = 0
+    for role, kind in args.schedule:
+        deadline = time.time() + RECOVERY_TIMEOUT_S
+        while time.time() < deadline and not (
+            time.time() >= not_before and ready_for_next(killer.stack, previous, step_then + args.steps_between)
+        ):
+            time.sleep(0.5)
+        records = metrics(killer.stack, killer.stack.run_name)
+        step_then = records[-1]["step"] if records else 0
+        if role == DISK_FULL:
+            disk.at_s = killer.now_s()
+            print(f"{disk.at_s:6.0f} s  disk full for {args.disk_full_for:.0f} s", flush=True)
+            disk_full_period(killer.stack, killer.stack.run_name, disk, args.disk_full_for, args.disk_full_refusals)
+            previous, not_before = None, time.time() + max(args.fault_every, QUIET_AFTER_DISK_S)
+            continue
+        previous = killer.fault(role, kind, random.Random(rng.random()))
+        not_before = time.time() + args.fault_every
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     scratch = Path(tempfile.mkdtemp(prefix="kc-chaos-"))
-    stack = Stack(scratch, args.project, settings, args.volume_mb, run_name)
+    stack = Stack(scratch, args.project, args.volume_mb)
+    try:
+        stack.prepare()
+        report = run_chaos(stack, args, sys.argv[1:] if argv is None else argv)
+    finally:
+        stack.down()
+        shutil.rmtree(scratch, ignore_errors=True)
+    print_report(report)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(report, indent=1) + "\n")
+    return 0 if report.get("passed") else 1
+
+
+def run_chaos(stack: Stack, args: argparse.Namespace, argv: list[str]) -> dict[str, Any]:
+    """One run on a prepared ``stack``, up or not: start it, do the faults, let it reach its budget, check.
+
+    The stack stays up, for its owner to take down; the report's ``passed`` is the verdict."""
+    disk_full_at = args.duration / 3 if args.disk_full_at is None else args.disk_full_at
+    settings = run_settings(args)
+    run_name = f"{settings['TEACHER']}-seed{settings['SEED']}"
+    scratch = Path(tempfile.mkdtemp(prefix="kc-chaos-run-"))
     observer = Observer(stack, run_name)
     rng = random.Random(args.seed)
-    faults: list[Fault] = []
     disk = DiskFull(at_s=disk_full_at, for_s=args.disk_full_for)
     report: dict[str, Any] = {
-        "command": shlex.join(["bench/chaos.py", *(sys.argv[1:] if argv is None else argv)]),
+        "command": shlex.join(["bench/chaos.py", *argv]),
         "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "commit": run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], check=False).strip(),
         "machine": {"cpus": os.cpu_count(), "memory_gib": memory_gib()},
         "settings": {k: v for k, v in settings.items() if k != "KC_TEACHER_TOKEN"} | {
             "duration_s": args.duration, "fault_every_s": args.fault_every, "seed": args.seed,
             "disk_full_at_s": disk_full_at, "disk_full_for_s": args.disk_full_for, "volume_mb": args.volume_mb,
+            "disk_full_refusals": args.disk_full_refusals,
+            "schedule": [":".join(filter(None, entry)) for entry in args.schedule or []],
+            "steps_between": args.steps_between if args.schedule else None, "aftermath_s": args.aftermath,
         },
     }  # fmt: skip
-    watchers: list[threading.Thread] = []
     try:
-        stack.prepare()
         up_at = time.time()
-        stack.compose("up", "--detach", "--no-build", "--scale", "ray-worker=2", timeout=600)
+        stack.start_run(settings)
         deadline = time.time() + args.start_timeout
         while not metrics(stack, run_name):
             if time.time() > deadline:
@@ -683,57 +880,22 @@ def main(argv: list[str] | None = None) -> int:
                 waited = f"{args.start_timeout:.0f} s"
                 raise RuntimeError(f"the learner logged no iteration within {waited} of `up`\n{detail}")
             time.sleep(2.0)
-        started = time.time()
-        report["up_to_first_iteration_s"] = started - up_at
+        killer = Killer(stack, observer, args.aftermath, started=time.time())
+        report["up_to_first_iteration_s"] = killer.started - up_at
         observer.thread.start()
-        print(f"training; faults every {args.fault_every:.0f} s for {args.duration:.0f} s, "
-              f"disk full at {disk_full_at:.0f} s for {args.disk_full_for:.0f} s", flush=True)  # fmt: skip
-
-        disk_thread = threading.Thread(
-            target=disk_full_period, args=(stack, run_name, disk, args.disk_full_for), daemon=True
-        )
-        disk_started = False
-        quiet_from, quiet_to = disk_full_at - 5.0, disk_full_at + args.disk_full_for + 15.0
-        next_fault = args.fault_every
-        while True:
-            now_s = time.time() - started
-            if not disk_started and now_s >= disk_full_at:
-                disk_thread.start()
-                disk_started = True
-                print(f"{now_s:6.0f} s  disk full for {args.disk_full_for:.0f} s", flush=True)
-            if next_fault > args.duration:
-                break
-            if now_s >= next_fault:
-                fault = Fault(at_s=now_s, role=rng.choice(ROLES), kind=rng.choice(KINDS))
-                pick = random.Random(rng.random())  # which replica: drawn whether or not it is used
-                if quiet_from <= now_s <= quiet_to:
-                    fault.note = "skipped: the disk is full"
-                elif fault.role == "learner" and learner_finished(stack):
-                    fault.note = "skipped: the learner has finished its run"
-                else:
-                    records = metrics(stack, run_name)
-                    fault.step_before = records[-1]["step"] if records else 0
-                    try:
-                        inject(stack, fault, pick)
-                    except Exception as error:  # a fault the bench could not do is recorded, not fatal
-                        fault.note = f"{type(error).__name__}: {error}"
-                    if fault.done:
-                        watcher = threading.Thread(target=watch_recovery, args=(stack, observer, fault), daemon=True)
-                        watcher.start()
-                        watchers.append(watcher)
-                faults.append(fault)
-                print(f"{now_s:6.0f} s  {fault.kind:7} {fault.role:10} {'done' if fault.done else fault.note}",
-                      flush=True)  # fmt: skip
-                next_fault += args.fault_every
-            time.sleep(0.5)
-        if disk_started:
-            disk_thread.join()
+        if args.schedule:
+            print(f"training; the faults in order: {', '.join(report['settings']['schedule'])}", flush=True)
+            scheduled_faults(killer, args, disk, rng)
+        else:
+            print(f"training; faults every {args.fault_every:.0f} s for {args.duration:.0f} s, "
+                  f"disk full at {disk_full_at:.0f} s for {args.disk_full_for:.0f} s", flush=True)  # fmt: skip
+            drawn_faults(killer, args, disk, rng)
 
         print("faults over; waiting for the run to reach its budget", flush=True)
         deadline = time.time() + args.finish_timeout
         while not learner_finished(stack) and time.time() < deadline:
             time.sleep(5.0)
-        for watcher in watchers:
+        for watcher in killer.watchers:
             watcher.join(timeout=max(0.0, deadline - time.time()))
         # Settle: no fit pending and the counters still for a few seconds.
         last: Any = None
@@ -769,7 +931,8 @@ def main(argv: list[str] | None = None) -> int:
         results = count_results(database, delivered)
         replayed = replay_matches(database, live)
         deaths = steps_lost(learner_starts(learner_log), records)
-        report.update(evaluate(args, faults, disk, results, replayed, deaths, records, states, learner_log, final))
+        checked = evaluate(args, killer.faults, disk, results, replayed, deaths, records, states, learner_log, final)
+        report.update(checked)
         report["timeline_samples"] = len(observer.timeline)
         report["restarts_by_cause"] = restarts_by_cause(report["faults"], observer.timeline)
         if args.artifacts:
@@ -782,13 +945,8 @@ def main(argv: list[str] | None = None) -> int:
             stack.save_log(args.artifacts)
     finally:
         observer.stop.set()
-        stack.down()
         shutil.rmtree(scratch, ignore_errors=True)
-    print_report(report)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(report, indent=1) + "\n")
-    return 0 if report.get("passed") else 1
+    return report
 
 
 def evaluate(
