@@ -6,6 +6,9 @@ from collections.abc import Iterator
 
 import pytest
 
+pytest_plugins = ["tests.docker_stack"]
+"""The Docker stack the Docker tests share: its fixtures, and the Docker tests run last."""
+
 RAY_TEST_CPUS = 4
 """Logical CPUs: two rollout actors plus room for a replacement while a killed one is reaped."""
 
