@@ -33,8 +33,8 @@ import yaml
 
 from kuka_curriculum import COMMANDS
 from learner.core.config import TrainConfig
-from learner.session import PUBLIC_URL_VARIABLE
-from learner.session import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
+from learner.job.session import PUBLIC_URL_VARIABLE
+from learner.job.session import TOKEN_VARIABLE as LEARNER_TOKEN_VARIABLE
 from teacher_service.core.config import Settings
 
 ROOT = Path(__file__).resolve().parents[1]
