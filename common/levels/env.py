@@ -17,6 +17,7 @@ import minigrid  # noqa: F401  # registers the MiniGrid environments
 import numpy as np
 from minigrid.wrappers import ImgObsWrapper
 
+import common.levels.gamut  # noqa: F401  # registers the level gamut
 from common.levels import LEVEL_ENV_IDS
 
 
