@@ -463,6 +463,47 @@ def test_a_level_kind_shows_its_likeliest_levels_with_no_console_error(
     page.close()
 
 
+def test_a_space_of_one_level_parameter_shows_each_level_s_results_success_and_score(
+    browser: Chromium, service: ServiceProcess
+) -> None:
+    """Issue 79: over levels 0 to 199 the task space drew the level against itself and the level bars had no
+    numbers. Now each level played shows its recent results and success rate on its own axis, its score on
+    hover, and the level bars are numbered."""
+    space = [{"name": "level", "type": "integer", "low": 0, "high": 199}]
+    with httpx.Client(base_url=f"{service.url}{API_PREFIX}/curricula", headers=WRITES, timeout=10) as client:
+        assert client.put("/one-level", json={"teacher": "plr", "space": space, "seed": 1}).status_code == 201
+        sent: list[dict[str, Any]] = []
+        for _ in range(6):  # the sweep of 200 levels, then replays
+            tasks = client.post("/one-level/tasks", json={"count": 40}).raise_for_status().json()["tasks"]
+            results = [
+                {"task_id": t["task_id"], "reward": 1.0, "success": t["params"]["level"] % 2 == 0, "score": 0.5}
+                for t in tasks
+            ]
+            client.post("/one-level/results", json={"results": results}).raise_for_status()
+            sent += [{**result, "level": task["params"]["level"]} for task, result in zip(tasks, results, strict=True)]
+        teacher = client.get("/one-level/state").raise_for_status().json()["teacher"]
+
+    page, problems = open_page(browser, f"{service.url}/curricula/one-level", service)
+    page.wait_for_function("() => (document.getElementById('space-plot').data || []).length > 0")
+    page.wait_for_function("() => (document.getElementById('levels-plot').data || []).length > 0")
+    drawn = traces(page, "space-plot")
+    levels = sorted({result["level"] for result in sent})
+    bars, dots = drawn["level-results"][0], drawn["level-success"][0]
+    assert bars["x"] == levels and dots["x"] == levels, "each level played, on the level's own axis"
+    assert bars["y"] == [sum(result["level"] == level for result in sent) for level in levels]
+    assert dots["y"] == [1.0 if level % 2 == 0 else 0.0 for level in levels]
+    assert page.is_hidden("#dim-y"), "one parameter: nothing to plot it against"
+    hover = page.evaluate("() => document.getElementById('space-plot').data[0].text")
+    assert 0 in {row["level"] for row in teacher["levels"]}, "equal scores: the lowest level ranks first"
+    assert hover[0].startswith("level 0<br>") and "success 100%" in hover[0] and "score 0.5" in hover[0]
+    axis = page.evaluate("() => document.getElementById('levels-plot').layout.xaxis")
+    assert axis.get("showticklabels", True) and axis["type"] == "category", "the level bars carry their numbers"
+    bar_hover = page.evaluate("() => document.getElementById('levels-plot').data[0].text")
+    assert all("recent results" in text for text in bar_hover)
+    assert problems == PageProblems()
+    page.close()
+
+
 def test_a_lesson_plan_that_steps_back_shows_its_lessons_and_moves(browser: Chromium, service: ServiceProcess) -> None:
     space = [
         {"name": "gravity", "low": 2.0, "high": 12.0, "hardest": 12.0, "easiest": 2.0},

@@ -239,6 +239,7 @@ function setUpDimensions(space) {
     select.replaceChildren(...view.dimensions.map((name) => new Option(name, name)));
     select.value = view.dimensions[index];
   }
+  document.getElementById("dim-y").closest("label").hidden = space.length === 1;  // nothing to plot it against
 }
 
 function renderSummary(state) {
@@ -363,6 +364,10 @@ function ellipse(centre, varX, varY, covXY, sigmas) {
 function renderTaskSpace() {
   const state = view.state;
   const space = state.curriculum.config.space;
+  if (space.length === 1) {
+    renderOneParameter(state, space[0]);
+    return;
+  }
   const xName = document.getElementById("dim-x").value;
   const yName = document.getElementById("dim-y").value;
   const [xIndex, yIndex] = [xName, yName].map((name) => view.dimensions.indexOf(name));
@@ -432,6 +437,102 @@ function renderTaskSpace() {
       xaxis: axis(xName, { range: range(xName) }),
       yaxis: axis(yName, { range: range(yName) }),
       uirevision: `${xName}/${yName}`,
+    }),
+    PLOT_CONFIG,
+  );
+}
+
+/** The key of a task's values in the space's order: recent results and a level table's rows are matched by it. */
+function taskKey(space, task) {
+  return space.map((p) => task[p.name]).join(",");
+}
+
+/** Per task of ``results``: how many came back, how many say whether they succeeded and how many did, and their
+ *  reward's sum, keyed by ``taskKey``. */
+function resultsPerTask(space, results) {
+  const tally = new Map();
+  for (const result of results) {
+    const key = taskKey(space, result.params);
+    const entry = tally.get(key) ?? { results: 0, told: 0, successes: 0, reward: 0 };
+    entry.results += 1;
+    entry.reward += result.reward;
+    if (result.success !== null && result.success !== undefined) {
+      entry.told += 1;
+      entry.successes += Number(result.success);
+    }
+    tally.set(key, entry);
+  }
+  return tally;
+}
+
+/** "12 recent results<br>success 50%<br>mean reward 0.41": a task's tally as hover lines. */
+function tallyText(entry) {
+  if (!entry) return "no recent results";
+  const success = entry.told ? `<br>success ${Math.round((100 * entry.successes) / entry.told)}%` : "";
+  return `${formatNumber(entry.results)} recent results${success}<br>mean reward ${formatValue(entry.reward / entry.results)}`;
+}
+
+/** A space of one parameter, drawn on its own axis rather than against itself: over a level space (one integer
+ *  parameter) each level's recent results as a bar and its success rate as a dot, its teacher's score and chance on
+ *  hover where the teacher lists the level; over one float parameter, recent results' rewards along it. */
+function renderOneParameter(state, parameter) {
+  const name = parameter.name;
+  const results = state.recent_results.slice(-SCATTER_RESULTS);
+  const xaxis = axis(name, parameter.type === "integer" ? {} : { range: [parameter.low, parameter.high] });
+  if (parameter.type !== "integer") {
+    setText("space-note", `last ${results.length} results`);
+    Plotly.react(
+      "space-plot",
+      [{
+        meta: "tasks", name: "tasks", type: "scatter", mode: "markers",
+        x: results.map((r) => r.params[name]), y: results.map((r) => r.reward),
+        marker: { size: 6, opacity: 0.8, color: results.map((r) => r.reward), colorscale: REWARD_SCALE },
+        hovertemplate: `${name} %{x:.3f}<br>reward %{y:.3f}<extra></extra>`,
+      }],
+      baseLayout({ margin: { l: 60, r: 8, t: 8, b: 48 }, xaxis, yaxis: axis("reward"), uirevision: name }),
+      PLOT_CONFIG,
+    );
+    return;
+  }
+  const space = [parameter];
+  const tally = resultsPerTask(space, results);
+  const listed = new Map((state.teacher.levels ?? []).map((row) => [taskKey(space, row.task), row]));
+  const values = [...tally.keys()].map(Number).sort((a, b) => a - b);
+  const hover = values.map((value) => {
+    const row = listed.get(String(value));
+    const teacherLines = row
+      ? Object.entries(row).filter(([column]) => !["task", "level"].includes(column))
+        .map(([column, v]) => `<br>${column} ${formatValue(v)}`).join("")
+      : "";
+    const level = row && row.level !== value ? ` (level ${row.level})` : "";
+    return `${name} ${value}${level}<br>${tallyText(tally.get(String(value)))}${teacherLines}`;
+  });
+  const rates = values.map((value) => {
+    const entry = tally.get(String(value));
+    return entry.told ? entry.successes / entry.told : null;
+  });
+  setText("space-note", `last ${results.length} results over ${formatNumber(values.length)} ${name}s`);
+  Plotly.react(
+    "space-plot",
+    [
+      {
+        meta: "level-results", name: "recent results", type: "bar", marker: { color: "#93c5fd" },
+        x: values, y: values.map((value) => tally.get(String(value)).results),
+        text: hover, textposition: "none", hovertemplate: "%{text}<extra></extra>",
+      },
+      {
+        meta: "level-success", name: "success rate", type: "scatter", mode: "markers", yaxis: "y2",
+        x: values, y: rates, marker: { size: 6, color: "#16a34a" }, text: hover, hovertemplate: "%{text}<extra></extra>",
+      },
+    ],
+    baseLayout({
+      margin: { l: 60, r: 56, t: 8, b: 48 },
+      xaxis,
+      yaxis: axis("recent results", { rangemode: "tozero" }),
+      yaxis2: axis("success rate", { overlaying: "y", side: "right", range: [0, 1.05], dtick: 0.25, tickformat: ".0%" }),
+      bargap: 0.1,
+      showlegend: false,
+      uirevision: name,
     }),
     PLOT_CONFIG,
   );
@@ -739,26 +840,31 @@ function renderTeacherState(state) {
   document.getElementById("moves-box").hidden = moves === null;
   if (moves !== null) renderMoves(moves, teacher.moves_total ?? moves.length);
   document.getElementById("levels-box").hidden = levels === null;
-  if (levels !== null) renderLevels(levels, teacher.level_count ?? levels.length);
+  if (levels !== null) renderLevels(levels, teacher.level_count ?? levels.length, state);
 }
 
-/** A level kind's `levels`: the likeliest next draws, most likely first, each with its own columns on hover. */
-function renderLevels(levels, total) {
+/** A level kind's `levels`: the likeliest next draws, most likely first, each numbered on the axis, with its own
+ *  columns (a score, a success rate) and its recent results on hover. */
+function renderLevels(levels, total, state) {
   setText("levels-note", `the ${formatNumber(levels.length)} likeliest next of ${formatNumber(total)}`);
   const shownApart = new Set(["level", "task", "probability"]);
+  const space = state.curriculum.config.space;
+  const tally = resultsPerTask(space, state.recent_results);
   Plotly.react(
     document.getElementById("levels-plot"),
     [{
       meta: "levels", name: "levels", type: "bar", marker: { color: "#2563eb" },
       x: levels.map((row) => `#${row.level}`), y: levels.map((row) => row.probability),
-      text: levels.map((row) => Object.entries(row).filter(([name]) => !shownApart.has(name))
-        .map(([name, value]) => `${name} ${formatValue(value)}`).join("<br>")),
+      text: levels.map((row) => [
+        ...Object.entries(row).filter(([name]) => !shownApart.has(name)).map(([name, value]) => `${name} ${formatValue(value)}`),
+        tallyText(tally.get(taskKey(space, row.task))),
+      ].join("<br>")),
       textposition: "none",
       hovertemplate: "level %{x}: chance %{y:.3f}<br>%{text}<extra></extra>",
     }],
     baseLayout({
-      margin: { l: 52, r: 16, t: 8, b: 40 },
-      xaxis: axis("level", { type: "category", showticklabels: levels.length <= 30 }),
+      margin: { l: 52, r: 16, t: 8, b: 52 },
+      xaxis: axis("level", { type: "category", tickangle: -90, tickfont: { size: 9 } }),
       yaxis: axis("chance of the next draw", { rangemode: "tozero" }),
       uirevision: "levels",
     }),
