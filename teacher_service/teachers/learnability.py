@@ -44,9 +44,9 @@ prior_weight * prior_success) / (its results + prior_weight); ``pool_size``, ``r
 reached through the fresh share, a uniform level, as SFL weighs by learnability only the levels it has
 rolled out. (Scored at the prior instead, p = 0.5 would make every unplayed level the most learnable
 there is, and the top-K draw a sweep of the levels played least lately.) The prior still pulls a level
-with few results toward 0.5: before any success, a level failed once scores above one failed ten times;
-``prior_weight`` 0 is SFL's plain success rate, which scores 0 everywhere until a level has both
-outcomes, and then draws uniformly. This is SFL's p(1 - p) per level with p from the training episodes
+with few results toward 0.5: before any success, a level failed once scores above one failed ten times.
+``prior_weight`` 0 gives SFL's plain success rate: every level scores 0 until one has both outcomes among
+its results, and until then replays are uniform. This is SFL's p(1 - p) per level with p from the training episodes
 rather than from extra rollouts, and Syllabus's ``Learnability`` with its top-K and uniform mix
 (``top_k``, ``fresh_share``).
 
@@ -207,8 +207,10 @@ class LearnabilityTeacher(Teacher):
         successes = np.bincount(played, weights=outcomes, minlength=self._levels)
         params = self.params
         self._pool = self._level_units.copy()
-        estimate = (successes + params.prior_weight * params.prior_success) / (results + params.prior_weight)
-        self._success = np.where(results > 0, estimate, UNKNOWN_SUCCESS)
+        played = results > 0
+        self._success = np.full(self._levels, UNKNOWN_SUCCESS)
+        prior = params.prior_weight * params.prior_success
+        self._success[played] = (successes[played] + prior) / (results[played] + params.prior_weight)
         self._refresh_choice()
 
     def _refresh(self) -> None:

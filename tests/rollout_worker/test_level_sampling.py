@@ -1,5 +1,5 @@
-"""The sampler on a real MiniGrid level family: discrete actions, each episode's score (PLR's positive value
-loss, from the values the policy predicted as it acted) and the score-only episodes' marks.
+"""The sampler on a real MiniGrid level family: discrete actions, each episode's score (by default robust PLR's
+positive value loss, from the values the policy predicted as it acted) and the score-only episodes' marks.
 
 The score is computed in the worker at each episode's end; here it must equal what the learner's own GAE
 (``learner.core.ppo.compute_advantages``) gives for the same steps, episodes that cross batches included."""

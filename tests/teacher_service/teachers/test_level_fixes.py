@@ -5,6 +5,7 @@ most learnable, ``plr`` replays every draw after its sweep as the PLR paper and 
 from __future__ import annotations
 
 import json
+import warnings
 from collections import Counter
 
 import pytest
@@ -38,6 +39,17 @@ def test_learnability_reaches_unplayed_levels_through_its_fresh_share() -> None:
     drawn = Counter(task["level"] for task in teacher.sample(2000))
     assert drawn[0] / 2000 == pytest.approx(0.5 + 0.5 / 40, abs=0.04), "every replay, plus its fresh share"
     assert len(drawn) == 40, "the fresh draws reach every level"
+
+
+def test_without_a_prior_a_level_scores_its_own_success_rate_and_unplayed_ones_none() -> None:
+    teacher = make_teacher("learnability", FORTY, 0, {"update_every": 3, "prior_weight": 0.0, "fresh_share": 0.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no 0 / 0 for the levels without results
+        for level, success in ((5, True), (5, False), (6, True)):
+            teacher.learn(EpisodeResult({"level": level}, 0.0, success=success))
+    rows = {row["level"]: row for row in teacher.state()["levels"]}
+    assert rows[5]["learnability"] == 0.25 and rows[6]["learnability"] == 0.0 and rows[7]["learnability"] is None
+    assert {task["level"] for task in teacher.sample(50)} == {5}
 
 
 def sweep(teacher_params: dict[str, object]) -> Counter[int]:
