@@ -207,10 +207,10 @@ class LearnabilityTeacher(Teacher):
         successes = np.bincount(played, weights=outcomes, minlength=self._levels)
         params = self.params
         self._pool = self._level_units.copy()
-        played = results > 0
+        known = results > 0  # a level without held results has no estimate
         self._success = np.full(self._levels, UNKNOWN_SUCCESS)
         prior = params.prior_weight * params.prior_success
-        self._success[played] = (successes[played] + prior) / (results[played] + params.prior_weight)
+        self._success[known] = (successes[known] + prior) / (results[known] + params.prior_weight)
         self._refresh_choice()
 
     def _refresh(self) -> None:
