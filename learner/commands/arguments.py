@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Callable
 from typing import Any
 
+from common.client.schemas import TEACHER_KIND_PATTERN
 from learner.core.config import TEACHERS
 
 
@@ -77,11 +79,22 @@ def add_override_flags(
         )
 
 
+def teacher_kind(text: str) -> str:
+    """A teacher kind's name, as the client's schemas shape it; which kinds exist is the service's to say."""
+    if re.fullmatch(TEACHER_KIND_PATTERN, text) is None:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a teacher kind's name (such as {', '.join(TEACHERS[:3])})")
+    return text
+
+
 def add_teacher_flags(parser: argparse.ArgumentParser) -> None:
     """``--teacher KIND`` (any kind of the service's registry; alp-gmm by default) and repeatable
     ``--teacher-param NAME=VALUE`` (into ``teacher_params``), for the examples' own parsers."""
     parser.add_argument(
-        "--teacher", default="alp-gmm", metavar="KIND", help=f"the curriculum's teacher kind: {', '.join(TEACHERS)}"
+        "--teacher",
+        type=teacher_kind,
+        default="alp-gmm",
+        metavar="KIND",
+        help=f"the curriculum's teacher kind: {', '.join(TEACHERS)}",
     )
     parser.add_argument(
         "--teacher-param",

@@ -24,6 +24,7 @@ from learner.commands.arguments import (
     non_negative_int,
     positive_int,
     run_command,
+    teacher_kind,
     unit_fraction,
 )
 from learner.commands.config_file import read_config_file
@@ -54,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     run.add_argument(
         "--teacher",
+        type=teacher_kind,
         metavar="KIND",
         help=f"curriculum teacher, a kind of the service: {', '.join(TEACHERS)} (default {DEFAULTS.teacher}); "
         "`GET /api/v1/teachers` lists a running service's kinds and which task spaces each takes",
