@@ -83,8 +83,9 @@ class SyllabusCurriculum:
         np.random.seed(seed)  # Syllabus samples from numpy's global generator
         self.kind = kind
         if kind == "syllabus-plr":
-            # Syllabus's defaults throughout (value_l1, rank, temperature 0.1, staleness 0.1, proportionate
-            # replay at 0.5 once every level is seen); the score is the workers' positive value loss.
+            # Syllabus's defaults (rank, temperature 0.1, staleness 0.1, proportionate replay at 0.5 once every
+            # level is seen); the score is what the workers send (--ppo level_score), not Syllabus's value_l1 unless
+            # level_score=value_l1.
             self.sampler = TaskSampler(list(range(levels)), 1, task_space=DiscreteTaskSpace(levels))
         elif kind == "syllabus-learning-progress":
             self.curriculum = OnlineLearningProgress(

@@ -3,9 +3,10 @@
 A level is the environment's reset seed, drawn from a fixed training set (``--levels`` of them): the
 curriculum's task space is one integer parameter, ``level``. ``ResetSeedAsLevel`` resets MiniGrid
 with the task's level as its seed, and ``PositiveValueLossScores``, a callback, sends each episode's
-score once PPO knows its advantages: PLR's positive value loss, the mean over the episode's steps of
-max(GAE advantage, 0). Without ``--scores`` the wrapper reports at once and the PLR teacher scores a
-level by the gap between its return and the level's previous return instead.
+score once PPO knows its advantages: robust PLR's positive value loss, the mean over the episode's
+steps of max(GAE advantage, 0) (the PLR paper's value_l1 takes the mean of |GAE advantage| instead).
+Without ``--scores`` the wrapper reports at once and the PLR teacher scores a level by the gap between its
+return and the level's previous return instead.
 
     .venv/bin/kuka-curriculum serve --port 8000 &
     .venv/bin/python examples/sb3_minigrid_plr.py --total-steps 200000

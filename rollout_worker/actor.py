@@ -51,8 +51,8 @@ class WorkerSettings:
     env_id: str = ENV_ID
     """The environment the workers step, of any task family (``common.families``)."""
     score_discount: ScoreDiscount | None = None
-    """The learner's discount and GAE lambda: each episode's result carries its positive value loss as its
-    score (None: results go without a score)."""
+    """The learner's discount and GAE lambda, and which score each episode's result carries (robust PLR's
+    positive value loss or the PLR paper's value_l1; None: results go without a score)."""
     results_buffer: int = 100_000
     """Most results a worker's client holds through a teacher outage before dropping the oldest
     (``TeacherClient.max_buffered_results``, about 0.6 KB each)."""

@@ -16,8 +16,8 @@ the step that ends the episode, with ``score_only`` (robust PLR's: leave the epi
 update). An episode cut short by an early ``reset`` is not reported.
 
 With ``scores_from_learner=True`` an ended episode waits for its score instead of being reported at
-once: the learner computes it once its advantages are known (PLR's positive value loss, the mean over
-the episode's steps of max(GAE advantage, 0)) and hands each environment's scores, in the order its
+once: the learner computes it once its advantages are known (robust PLR's positive value loss, the mean
+over the episode's steps of max(GAE advantage, 0)) and hands each environment's scores, in the order its
 episodes ended, to ``report_scores`` (through ``VecEnv.env_method`` from a Stable-Baselines3 callback:
 ``examples/sb3_minigrid_plr.py``). At most ``MAX_UNSCORED`` episodes wait; past that, and at
 ``close``, the oldest go without a score, and the teacher falls back on the return or success.

@@ -23,8 +23,9 @@ class EpisodeStats:
     length: int
     task_id: str | None = None
     score: float | None = None
-    """PLR's positive value loss: the mean over the episode's steps of max(GAE advantage, 0), from the values
-    the policy predicted as it acted (None where the sampler computes none, as in evaluations)."""
+    """The episode's level score from its GAE advantages, computed with the values the policy predicted as it
+    acted: robust PLR's positive value loss (the mean of max(advantage, 0)) or the PLR paper's value_l1 (the
+    mean of |advantage|), as the run chose (None where the sampler computes none, as in evaluations)."""
     score_only: bool = False
     """The teacher issued the task for scoring only (robust PLR): its steps stay out of the policy update."""
 

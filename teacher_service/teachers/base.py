@@ -49,8 +49,8 @@ class EpisodeResult:
     success: bool | None = None
     length: int | None = None
     score: float | None = None
-    """The learner's measure of what the episode has left to teach (PLR's positive value loss), when
-    it sends one; the level kinds read it, the rest ignore it."""
+    """The learner's measure of what the episode has left to teach (robust PLR's positive value loss, or the
+    PLR paper's value_l1), when it sends one; the level kinds read it, the rest ignore it."""
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.reward):
