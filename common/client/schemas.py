@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_serializer, model_validator
 from typing_extensions import Self
 
 from common.client.task_space import Parameter, ParameterType, TaskSpace
@@ -74,6 +74,14 @@ class ParameterSpec(_Request):
         description="`float`: any value from low to high. `integer`: the whole numbers from low to high, both "
         "included (a level seed, a layout choice); tasks then carry ints. Left out, a parameter is a float.",
     )
+
+    @field_serializer("low", "high", "hardest", "easiest")
+    def _whole_for_integers(self, value: float | None) -> int | float | None:
+        """An integer parameter's bounds and anchors go out as the whole numbers they are (``"high": 199``, not
+        ``199.0``), so a registration echoes what was sent."""
+        if value is not None and self.type == "integer" and float(value).is_integer():
+            return int(value)
+        return value
 
     def to_parameter(self) -> Parameter:
         return Parameter(self.name, self.low, self.high, hardest=self.hardest, easiest=self.easiest, type=self.type)

@@ -14,6 +14,7 @@ import argparse
 import functools
 from pathlib import Path
 
+from common.families import family_for
 from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
 from learner.commands.config_file import BakeoffConfigAction
 from learner.commands.training_flags import add_training_flags
@@ -86,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     evaluation.add_argument("--eval-seed", type=int, default=0, help="episode i is seeded eval-seed + i (default 0)")
     evaluation.add_argument("--eval-processes", type=positive_int, help="evaluation processes (default: one per CPU)")
     training = parser.add_argument_group("training, the same for every run")
-    add_training_flags(training, defaults_given=True)
+    add_training_flags(training, defaults_given=True, level_families=True)
     training.add_argument(
         "--curve-every",
         type=int_at_least(0),
@@ -115,6 +116,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     training.add_argument(
         "--ray-address", help="a running Ray cluster for the runs (default: each run starts a local one)"
     )
+
+
+def has_scripted_controller(env_id: str) -> bool:
+    """Whether the family has a hand-made controller to play beside the teachers (KUKA's)."""
+    try:
+        family_for(env_id).scripted_controller(env_id)
+    except ValueError:
+        return False
+    return True
 
 
 def run(args: argparse.Namespace) -> int:
@@ -151,15 +161,17 @@ def _bakeoff(args: argparse.Namespace) -> int:
         teacher_runs = tuple(run for run in runs if run.teacher == teacher) + further
         evaluations = tuple(evaluate(run) for run in teacher_runs)
         results.append(TeacherResult(teacher, teacher_runs, evaluations, args.env))
-    scripted = scripted_evaluation(
-        args.out / SCRIPTED_EVALUATION,
-        args.env,
-        args.eval_episodes,
-        args.eval_seed,
-        args.eval_processes,
-        args.max_episode_steps,
-    )
-    print(f"scripted controller: {scripted.summary()}")
+    scripted = None
+    if has_scripted_controller(args.env):
+        scripted = scripted_evaluation(
+            args.out / SCRIPTED_EVALUATION,
+            args.env,
+            args.eval_episodes,
+            args.eval_seed,
+            args.eval_processes,
+            args.max_episode_steps,
+        )
+        print(f"scripted controller: {scripted.summary()}")
     write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed, scripted, args.baseline)
     for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES, PERFORMANCE_PROFILE, PLACEMENT_PLOT):
         print(args.out / name)

@@ -14,10 +14,11 @@ from typing import Any
 import numpy as np
 
 from common.client.schemas import TEACHER_LABELS
+from common.families import family_for
 from common.kuka import ENV_ID
 from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
-from common.kuka.task_space import task_space_for
+from common.levels import DEFAULT_LEVELS
 from learner.core.config import TrainConfig
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import EvaluationResult
@@ -422,7 +423,9 @@ def write_reports(
             "settings": settings,
             "evaluation": {
                 "env": settings.get("env", ENV_ID),
-                "task": task_space_for(settings.get("env", ENV_ID)).hardest(),
+                "task": family_for(settings.get("env", ENV_ID)).evaluation_task(
+                    settings.get("env", ENV_ID), settings.get("levels", DEFAULT_LEVELS)
+                ),
                 "episodes": episodes,
                 "seed": seed,
                 "confidence": CONFIDENCE,

@@ -26,7 +26,7 @@ from typing import Any
 from tqdm import tqdm
 
 from common.kuka import ENV_ID
-from common.kuka.task_space import task_space_for
+from common.levels import DEFAULT_LEVELS
 from learner.commands.arguments import UsageError
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TrainConfig
@@ -49,6 +49,7 @@ POLL_S = 1.0
 
 TRAINING_FLAGS = {
     "env": "--env",
+    "levels": "--levels",
     "workers": "--workers",
     "envs_per_worker": "--envs-per-worker",
     "rollout_length": "--rollout-length",
@@ -59,7 +60,7 @@ TRAINING_FLAGS = {
     "loop": "--loop",
 }
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
-ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID}
+ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID, "levels": DEFAULT_LEVELS}
 """Settings newer than some stored bake-offs, with the value their runs were trained with."""
 
 
@@ -330,7 +331,8 @@ def train_runs(
 
 
 def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_id: str = ENV_ID) -> EvaluationResult:
-    """The final policy on its environment's hardest task, cached with the checkpoint it came from."""
+    """The final policy on its environment's evaluation task (the hardest, or held-out levels), cached with the
+    checkpoint it came from."""
     checkpoint = latest_checkpoint(run.directory)
     assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
     cache = run.directory / EVALUATION_FILE
@@ -343,8 +345,8 @@ def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_
             and cached.get("env", ENV_ID) == env_id
         ):
             return EvaluationResult.from_dict(cached)
-    task = task_space_for(env_id).hardest()
-    result = evaluate_checkpoint(load_checkpoint(checkpoint), task, episodes, seed, processes)
+    trained = load_checkpoint(checkpoint)
+    result = evaluate_checkpoint(trained, trained.config.evaluation_task(), episodes, seed, processes)
     write_json(cache, {"checkpoint": checkpoint.name, **result.to_dict()})
     compressed(cache).unlink(missing_ok=True)  # an archived run's earlier evaluation, now superseded
     return result

@@ -29,9 +29,9 @@ from typing import Any
 
 from pydantic import SecretStr
 
-from common.kuka import ENV_IDS
 from learner.commands.arguments import UsageError, add_override_flags, positive_int, run_command
-from learner.core.config import TEACHERS, TrainConfig
+from learner.commands.training_flags import env_id
+from learner.core.config import LISTED_ENV_IDS, TEACHERS, TrainConfig
 from learner.core.json_file import write_json
 from learner.experiments.tune_settings import (
     ASHA_REDUCTION,
@@ -50,7 +50,12 @@ from learner.job import session
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     search = parser.add_argument_group("search")
-    search.add_argument("--env", choices=ENV_IDS, help=f"task family (default {DEFAULTS.env})")
+    search.add_argument(
+        "--env",
+        type=env_id,
+        metavar="ENV",
+        help=f"the environment: {', '.join(LISTED_ENV_IDS)}, or module:EnvId (default {DEFAULTS.env})",
+    )
     search.add_argument("--teacher", choices=TEACHERS, help=f"curriculum teacher (default {DEFAULTS.teacher})")
     search.add_argument(
         "--search-space",

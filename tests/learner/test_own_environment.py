@@ -1,10 +1,13 @@
 """A user's environment, which the project has never seen, trains, evaluates and renders from ``--env
 module:EnvId`` (docs/own-environment.md): ``examples.own_env``'s box-task ``PointReach-v0`` (an MLP and a
 Gaussian, under ALP-GMM) and its image-level ``GridLevels-v0`` (a CNN and a categorical head, under PLR), and an
-environment that breaks the contract is refused in one line with exit code 2."""
+environment that breaks the contract is refused in one line with exit code 2; a bake-off runs on one too."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -32,15 +35,17 @@ def from_the_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
     ],
 )
 def test_a_users_environment_trains_evaluates_and_renders(
-    tmp_path, capsys, env_id, teacher, task, image, categorical
+    tmp_path, capsys, ray_cluster, env_id, teacher, task, image, categorical
 ) -> None:
     run_dir = tmp_path / "run"
-    assert main(["train", "--env", env_id, "--teacher", teacher, "--run-dir", str(run_dir), *SMALL_RUN]) == 0
+    command = [sys.executable, "-m", "kuka_curriculum", "train", "--env", env_id, "--teacher", teacher]
+    command += ["--run-dir", str(run_dir), "--ray-address", ray_cluster, *SMALL_RUN]
+    trained = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert trained.returncode == 0, trained.stderr[-3000:]
     checkpoint = load_checkpoint(latest_checkpoint(run_dir))
     assert checkpoint.config.env == env_id and checkpoint.counters.steps >= 2048
     spec = policy_spec_for(env_id, checkpoint.config.ppo)
     assert (spec.image_shape is not None, spec.categorical) == (image, categorical)
-    capsys.readouterr()
 
     assert main(["evaluate", str(run_dir), "--episodes", "4", "--processes", "1"]) == 0
     assert f"{env_id}, {task}, 4 episodes" in capsys.readouterr().out
@@ -78,3 +83,14 @@ def test_a_setting_the_network_cannot_take_is_one_line_before_anything_starts(tm
     error = capsys.readouterr().err.strip()
     assert "a critic that reads the task needs a flat observation" in error and len(error.splitlines()) == 1
     assert not (tmp_path / "run").exists()
+
+
+def test_a_bakeoff_runs_on_a_users_environment(tmp_path, ray_cluster) -> None:
+    out = tmp_path / "bakeoff"
+    flags = ["--teachers", "random", "--seeds", "1", "--total-steps", "512", "--workers", "1", "--envs-per-worker", "2"]
+    flags += ["--rollout-length", "128", "--curve-episodes", "2", "--eval-episodes", "4", "--eval-processes", "1"]
+    env_id = "examples.own_env:PointReach-v0"
+    assert main(["bakeoff", "--out", str(out), "--ray-address", ray_cluster, "--env", env_id, *flags]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["evaluation"]["env"] == env_id and results["scripted"] is None
+    assert results["teachers"][0]["teacher"] == "random" and (out / "results.md").exists()

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from common.client.schemas import ParameterSpec
 from common.client.task_space import Parameter, TaskSpace
 
 LEVELS = TaskSpace([Parameter("level", 0, 199, type="integer")])
@@ -73,3 +74,11 @@ def test_levels_number_every_task_of_a_multidiscrete_space_once():
 def test_a_float_parameter_has_no_level_count():
     with pytest.raises(ValueError, match="'friction' is a float parameter"):
         MIXED.level_count()
+
+
+def test_a_registration_echoes_an_integer_parameters_bounds_as_the_ints_it_was_sent():
+    level = ParameterSpec(name="level", low=0, high=199, hardest=7, type="integer").model_dump(mode="json")
+    assert (level["low"], level["high"], level["hardest"]) == (0, 199, 7)
+    assert all(type(level[key]) is int for key in ("low", "high", "hardest"))
+    share = ParameterSpec(name="share", low=0, high=1).model_dump(mode="json")
+    assert (share["low"], share["high"]) == (0.0, 1.0) and type(share["high"]) is float
