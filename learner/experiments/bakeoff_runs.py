@@ -207,7 +207,7 @@ def train_command(
         str(run.directory),
     ]
     for name, flag in TRAINING_FLAGS.items():
-        command += [flag, str(settings[name])]
+        command += [flag, str(settings.get(name, ADDED_SETTINGS.get(name)))]  # settings stored before it: its value
     for key, value in settings["ppo"].items():
         command += ["--ppo", f"{key}={json.dumps(value)}"]
     for key, value in settings["teacher_params"].get(run.teacher, {}).items():
