@@ -22,6 +22,7 @@ import numpy as np
 
 from common.client.task_space import Task, TaskSpace
 from common.client.teacher_client import Assignment
+from common.families.base import env_action
 from common.policy.inference import InferencePolicy
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
 
@@ -285,17 +286,12 @@ def run_episodes(
     """Play one whole episode per seed on a fixed task (evaluation: nothing is reported anywhere). The actor
     acts alone: no values are needed, so a critic that reads the task is never asked (``InferencePolicy.act``)."""
     results = []
-    discrete = isinstance(env.action_space, gym.spaces.Discrete)
-    if not discrete:
-        space = cast(gym.spaces.Box, env.action_space)  # actions are clipped into its bounds
-        low, high = space.low, space.high
     for seed in seeds:
         observation, info = env.reset(seed=int(seed), options={"task": task})
         total, length, done = 0.0, 0, False
         while not done:
             action, _, _ = policy.act(observation[None], deterministic=deterministic)
-            env_action = int(action[0, 0]) if discrete else np.clip(action[0], low, high)
-            observation, reward, ended, timed_out, info = env.step(env_action)
+            observation, reward, ended, timed_out, info = env.step(env_action(env.action_space, action[0]))
             total += float(reward)
             length += 1
             done = ended or timed_out

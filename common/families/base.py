@@ -45,6 +45,15 @@ class PlayedEpisode:
     diagnostics: object | None = None
 
 
+def env_action(space: gym.Space[Any], action: np.ndarray) -> Any:
+    """One policy action as ``env.step`` takes it: a ``Discrete`` choice's index (carried as a one-entry array) as
+    an int, a ``Box`` vector clipped into the box, as the rollout workers clip it."""
+    if isinstance(space, gym.spaces.Discrete):
+        return int(action[0])
+    assert isinstance(space, gym.spaces.Box), "a family's actions are Discrete or a Box"
+    return np.clip(action, space.low, space.high)
+
+
 class UnusableEnvironment(ValueError):
     """An environment the trainer cannot train on; the message is one line that says what to add or fix."""
 
@@ -165,17 +174,10 @@ class TaskFamily(ABC):
     def play_episode(self, env: gym.Env[np.ndarray, Any], task: Task, act: Controller, seed: int) -> PlayedEpisode:
         """One whole episode of ``act`` on ``task`` (none: the environment's own draw from ``seed``), its actions
         clipped into a Box as the rollout workers clip them."""
-        discrete = isinstance(env.action_space, gym.spaces.Discrete)
-        box = env.action_space if isinstance(env.action_space, gym.spaces.Box) else None
         observation, info = env.reset(seed=seed, options={"task": task})
         total, length, done = 0.0, 0, False
         while not done:
-            action = act(observation)
-            if discrete:
-                observation, reward, terminated, truncated, info = env.step(int(action[0]))
-            else:
-                assert box is not None, "a family's actions are Discrete or a Box"
-                observation, reward, terminated, truncated, info = env.step(np.clip(action, box.low, box.high))
+            observation, reward, terminated, truncated, info = env.step(env_action(env.action_space, act(observation)))
             total += float(reward)
             length += 1
             done = terminated or truncated

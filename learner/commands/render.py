@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from common.client.task_space import Task
 from common.families import family_for
+from common.families.base import env_action
 from common.kuka import ENV_ID
 from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
@@ -110,8 +111,6 @@ def film_episodes(
     family = family_for(env_id)
     env = family.make_env(env_id, max_episode_steps, render_mode="rgb_array")
     policy = InferencePolicy(snapshot)
-    discrete = isinstance(env.action_space, gym.spaces.Discrete)
-    box = env.action_space if isinstance(env.action_space, gym.spaces.Box) else None
     every = steps_per_frame(env)
     fps = min(FRAMES_PER_SECOND, float(env.metadata.get("render_fps") or DEFAULT_RENDER_FPS))
     hold = round(HOLD_LAST_FRAME_S * fps)
@@ -127,11 +126,7 @@ def film_episodes(
             frames.append(label_frame(camera_frame(env), episode, episodes, step, episode_return, success))
             while not done:
                 action, _, _ = policy.act(observation[None], deterministic=family.deterministic_evaluation)
-                if discrete:
-                    observation, reward, terminated, truncated, info = env.step(int(action[0, 0]))
-                else:
-                    assert box is not None, "a family's actions are Discrete or a Box"
-                    observation, reward, terminated, truncated, info = env.step(np.clip(action[0], box.low, box.high))
+                observation, reward, terminated, truncated, info = env.step(env_action(env.action_space, action[0]))
                 step += 1
                 episode_return += float(reward)
                 done = terminated or truncated
