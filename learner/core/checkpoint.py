@@ -42,6 +42,12 @@ class Counters:
     worker_replacements: int = 0
     results_dropped: int = 0
     """Results the workers' teacher clients dropped through outages longer than their buffers."""
+    score_only_steps: int = 0
+    """Steps of score-only episodes (robust PLR's explorations): played and counted in ``steps``, not trained on."""
+
+    def budget_spent(self, counted: str) -> int:
+        """The steps that count toward the budget: all played (``played``), or those trained on (``trained``)."""
+        return self.steps - self.score_only_steps if counted == "trained" else self.steps
 
 
 @dataclass(frozen=True)

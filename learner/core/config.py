@@ -156,6 +156,10 @@ same of a running service; a test holds the two equal). ``train`` takes any kind
 which registers the curriculum before anything starts, refuse one it does not know: a kind added to the
 service is one module and one line there, and trains at once."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
+BudgetSteps = Literal["played", "trained"]
+BUDGET_STEPS: tuple[BudgetSteps, ...] = ("played", "trained")
+"""What ``TrainConfig.total_steps`` counts: every step the workers played, or only the steps the updates
+trained on (the steps of score-only episodes, robust PLR's explorations, then cost nothing)."""
 LISTED_ENV_IDS: tuple[str, ...] = listed_env_ids()
 """The ids ``train --env`` lists: the KUKA families, then the MiniGrid level families; it also takes any
 gymnasium environment with a task space as ``module:EnvId`` (``common.families``)."""
@@ -171,6 +175,8 @@ class TrainConfig:
     """A MiniGrid level family's training set: the reset seeds 0 to levels - 1 (other families ignore it)."""
     total_steps: int = 2_000_000
     """Environment steps to train for (the run stops after the iteration that reaches it)."""
+    budget_steps: BudgetSteps = "played"
+    """Which steps ``total_steps`` counts (``BUDGET_STEPS``): every step played, or only those trained on."""
     workers: int = 2
     """Rollout actors, one CPU each."""
     envs_per_worker: int = 4
@@ -204,6 +210,10 @@ class TrainConfig:
         family = family_for(self.env)  # an UnusableEnvironment, a ValueError, for an id no family owns
         _require(1 <= self.levels <= MAX_LEVELS, f"levels must be between 1 and {MAX_LEVELS:,}, got {self.levels}")
         _require(self.total_steps >= 1, "total_steps must be at least 1")
+        _require(
+            self.budget_steps in BUDGET_STEPS,
+            f"budget_steps must be one of {', '.join(BUDGET_STEPS)}, got {self.budget_steps!r}",
+        )
         _require(self.workers >= 1, "workers must be at least 1")
         _require(self.envs_per_worker >= 1, "envs_per_worker must be at least 1")
         _require(self.max_episode_steps >= 1, "max_episode_steps must be at least 1")

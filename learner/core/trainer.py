@@ -15,7 +15,9 @@ The weights travel through Ray's object store once per iteration (``ray.put``) a
 reads them from there. Stopping (the budget is spent, or ``request_stop``) only happens between
 iterations, after every batch in flight has been learned from (asynchronous, a stop requested while
 the next batch is already under way waits for it), so every episode the workers played is counted
-and the final checkpoint is always a consistent one.
+and the final checkpoint is always a consistent one. The budget counts every step played, or with
+``TrainConfig.budget_steps`` "trained" only the steps trained on: score-only episodes (robust PLR's
+explorations) are then free, and the learning rate anneals over the trained steps.
 """
 
 from __future__ import annotations
@@ -169,13 +171,22 @@ class _IterationLoop:
         self.evaluation: _Evaluation | None = None
         self.held: list[tuple[int, dict[str, float]]] = []
 
-    def _wants_more(self, steps_after_this_batch: int) -> bool:
-        return steps_after_this_batch < self.config.total_steps and not self.trainer.stop_requested
+    def _wants_more(self, spent_after_this_batch: int) -> bool:
+        return spent_after_this_batch < self.config.total_steps and not self.trainer.stop_requested
+
+    def _spent(self) -> int:
+        """The steps spent of the budget so far (``TrainConfig.budget_steps``)."""
+        return self.trainer.counters.budget_spent(self.config.budget_steps)
+
+    def _charge(self, batches: list[TrajectoryBatch]) -> int:
+        """What ``batches`` add to the budget: every step, or those not score-only."""
+        steps = sum(batch.num_steps for batch in batches)
+        return steps - _score_only_steps(batches) if self.config.budget_steps == "trained" else steps
 
     def run(self) -> None:
         trainer, asynchronous = self.trainer, self.config.loop == "async"
         snapshot_ref = ray.put(trainer.learner.snapshot())
-        if not self._wants_more(trainer.counters.steps):
+        if not self._wants_more(self._spent()):
             return
         in_flight: InFlight[TrajectoryBatch] | None = self.pool.start_sampling(snapshot_ref)
         while in_flight is not None:
@@ -183,15 +194,17 @@ class _IterationLoop:
             replacements_before = self.pool.replacements
             # Asynchronous: each worker starts its next batch, with the newest weights, the moment it has
             # delivered this one, and samples it while the learner updates; none waits for the slowest.
+            # Started only if the budget is not spent even were the whole batch in flight to count; a batch of
+            # score-only steps that count nothing (budget_steps "trained") leaves more, started after the update.
             following = None
-            if asynchronous and self._wants_more(trainer.counters.steps + self.config.batch_size):
+            if asynchronous and self._wants_more(self._spent() + self.config.batch_size):
                 following = self.pool.start_sampling(snapshot_ref, send=False)
             batches = in_flight.result(on_arrival=following.send if following is not None else None)
             sampled = time.perf_counter()
             steps = sum(batch.num_steps for batch in batches)
-            go_on = following is not None or (not asynchronous and self._wants_more(trainer.counters.steps + steps))
+            go_on = following is not None or self._wants_more(self._spent() + self._charge(batches))
             in_flight = following
-            progress = trainer.counters.steps / self.config.total_steps
+            progress = self._spent() / self.config.total_steps
             lag = float(np.mean([trainer.learner.version - batch.policy_version for batch in batches]))
             losses = trainer.learner.update(batches, progress, max_policy_lag=1 if asynchronous else 0)
             snapshot_ref = ray.put(trainer.learner.snapshot())
@@ -227,6 +240,8 @@ class _IterationLoop:
         offline = sum(episode.task_id is None for episode in episodes)
         counters.iteration += 1
         counters.steps += sum(batch.num_steps for batch in batches)
+        score_only_steps = _score_only_steps(batches)
+        counters.score_only_steps += score_only_steps
         counters.episodes += len(episodes)
         counters.offline_episodes += offline
         counters.worker_replacements += replacements
@@ -237,6 +252,7 @@ class _IterationLoop:
             "train/episodes": float(len(episodes)),
             "train/offline_episodes": float(offline),
             "train/score_only_episodes": float(sum(episode.score_only for episode in episodes)),
+            "train/score_only_steps": float(score_only_steps),
             "train/episode_reward": _mean(e.reward for e in episodes),
             "train/success_rate": _mean(e.success for e in episodes),
             "train/episode_length": _mean(e.length for e in episodes),
@@ -285,6 +301,11 @@ class _IterationLoop:
                     recent_success_rate=_mean(e.success for e in trainer.recent_episodes),
                 )
             )
+
+
+def _score_only_steps(batches: Iterable[TrajectoryBatch]) -> int:
+    """Steps of score-only episodes in ``batches``: played, left out of the update."""
+    return sum(int(batch.score_only.sum()) for batch in batches if batch.score_only is not None)
 
 
 def _mean(values: Iterable[float]) -> float:

@@ -42,6 +42,21 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
     assert TrainConfig.from_dict(saved).env == "KukaGrasp-v0" == TrainConfig().env
 
 
+def test_a_config_saved_before_budget_steps_existed_counts_every_step_played():
+    saved = TrainConfig().to_dict()
+    del saved["budget_steps"]
+    assert TrainConfig.from_dict(saved).budget_steps == "played" == TrainConfig().budget_steps
+
+
+def test_the_budget_counts_score_only_steps_only_when_it_counts_every_step_played():
+    from learner.core.checkpoint import Counters
+
+    counters = Counters(steps=1000, score_only_steps=300)
+    assert counters.budget_spent("played") == 1000
+    assert counters.budget_spent("trained") == 700
+    assert Counters(**{"steps": 10}).score_only_steps == 0, "counters saved before the field count none"
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [
@@ -52,6 +67,7 @@ def test_a_config_saved_before_the_hard_family_existed_loads_as_trained_on_the_b
         ),
         (lambda: TrainConfig(workers=0), "workers"),
         (lambda: TrainConfig(total_steps=0), "total_steps"),
+        (lambda: TrainConfig(budget_steps="scored"), "budget_steps must be one of played, trained"),
         (lambda: TrainConfig(env="KukaGraspHard-v1", edge_placement_share=1.5), "edge_placement_share must be"),
         (lambda: TrainConfig(edge_placement_share=0.5), "edge_placement_share needs a hard KUKA family"),
         (lambda: PPOConfig(gamma=1.5), "gamma"),
