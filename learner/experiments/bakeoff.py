@@ -34,6 +34,7 @@ from learner.experiments.bakeoff_runs import (
     Run,
     RunFailed,
     archives_runs,
+    check_curricula,
     check_settings,
     evaluate_run,
     further_finished_runs,
@@ -43,6 +44,7 @@ from learner.experiments.bakeoff_runs import (
 )
 from learner.experiments.bakeoff_statistics import DEFAULT_BASELINE, TeacherResult
 from learner.experiments.run_archive import archive_run
+from learner.job.teacher_probe import teacher_probe
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -136,7 +138,10 @@ def run(args: argparse.Namespace) -> int:
 def _bakeoff(args: argparse.Namespace) -> int:
     teachers = list(dict.fromkeys(args.teachers))
     settings = {name: getattr(args, name) for name in TRAINING_FLAGS} | {"total_steps": args.total_steps}
-    settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params_by_kind(args.teacher_params, teachers)}
+    with teacher_probe() as probe:  # the service says which kinds, parameters and spaces it takes
+        teacher_params = teacher_params_by_kind(args.teacher_params, teachers, probe.kinds)
+        check_curricula(probe, teacher_params, args.env, args.levels)
+    settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params}
     archive = archives_runs(args.out)
     settings = check_settings(args.out, settings, teachers)
     runs = plan_runs(args.out, teachers, args.seeds)

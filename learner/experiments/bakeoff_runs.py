@@ -18,7 +18,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +41,7 @@ from learner.experiments.run_archive import (
     read_json,
     restore_run,
 )
+from learner.job.teacher_probe import TeacherProbe
 
 RUNS_DIR = "runs"
 SETTINGS_FILE = "bakeoff.json"
@@ -100,28 +101,37 @@ def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
     return [Run.in_bakeoff(out, teacher, seed) for teacher in teachers for seed in range(seeds)]
 
 
-def teacher_params_by_kind(pairs: Sequence[tuple[str, Any]], teachers: Sequence[str]) -> dict[str, dict[str, Any]]:
+def teacher_params_by_kind(
+    pairs: Sequence[tuple[str, Any]], teachers: Sequence[str], kinds: Collection[str]
+) -> dict[str, dict[str, Any]]:
     """``--teacher-param`` pairs as each teacher's parameters: ``KIND.NAME`` sets one teacher's (and
     is left out when that kind is not among ``teachers``, so one script can name every teacher's
-    parameters and run a few teachers), a plain ``NAME`` every teacher's. Each teacher's set, on top
-    of its KUKA defaults, is checked against its kind's model here, so a typo stops the bake-off
-    before its first run rather than in one of them."""
-    from teacher_service.teachers import TEACHER_KINDS
-
+    parameters and run a few teachers), a plain ``NAME`` every teacher's. A ``KIND`` outside ``kinds``,
+    the service's (``TeacherProbe.kinds``), is refused; ``check_curricula`` checks the values."""
     params: dict[str, dict[str, Any]] = {teacher: {} for teacher in teachers}
     for target, value in pairs:
         kind, dot, name = target.rpartition(".")
-        if dot and kind not in TEACHER_KINDS:
-            raise UsageError(f"--teacher-param {target}: no teacher kind {kind!r}; known: {', '.join(TEACHER_KINDS)}")
+        if dot and kind not in kinds:
+            raise UsageError(f"--teacher-param {target}: no teacher kind {kind!r}; known: {', '.join(kinds)}")
         for teacher in ([kind] if kind in params else []) if dot else teachers:
             params[teacher][name] = value
-    for teacher, values in params.items():
-        registered = TrainConfig(teacher=teacher, teacher_overrides=values).teacher_params
-        try:
-            TEACHER_KINDS[teacher].Params.parse(registered)
-        except ValueError as error:
-            raise UsageError(f"--teacher-param for {teacher}: {error}") from None
     return params
+
+
+def check_curricula(probe: TeacherProbe, teacher_params: Mapping[str, dict[str, Any]], env: str, levels: int) -> None:
+    """Register each teacher's curriculum as its runs will (its parameters on top of the family's, over the
+    family's task space) with ``probe``, a throwaway service: a parameter, or a kind that does not take the
+    space, that the service refuses stops the bake-off before its first run rather than in one of them,
+    with the service's reason."""
+    for teacher, values in teacher_params.items():
+        try:
+            config = TrainConfig(teacher=teacher, env=env, levels=levels, teacher_overrides=values)
+        except ValueError as error:
+            raise UsageError(str(error)) from None
+        refusal = probe.refusal(teacher, config.task_space(), config.teacher_params)
+        if refusal is not None:
+            where = f"--teacher-param for {teacher}" if refusal.about_parameters else f"{teacher} on {env}"
+            raise UsageError(f"{where}: {refusal}")
 
 
 def further_finished_runs(out: Path, teacher: str, seeds: int, total_steps: int) -> list[Run]:

@@ -9,6 +9,7 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -30,6 +31,7 @@ from learner.experiments.bakeoff_report import BOOK_RETURNS, results_markdown, t
 from learner.experiments.bakeoff_runs import (
     Run,
     archives_runs,
+    check_curricula,
     check_settings,
     learning_curve,
     plan_runs,
@@ -48,6 +50,7 @@ from learner.experiments.run_archive import (
     resume_files,
     write_up_files,
 )
+from learner.job.teacher_probe import TeacherProbe, teacher_probe
 
 BATCH = 1 * 2 * 128
 TINY = [
@@ -387,31 +390,51 @@ def test_the_report_says_how_many_seeds_while_a_round_is_unfinished(tmp_path):
 
 
 def test_bad_teacher_parameters_stop_the_bakeoff_before_any_run(tmp_path, capsys):
+    """Each refusal is the teacher service's, asked before the first run: a kind it does not list, a value its
+    model refuses, a kind that does not take the family's task space."""
     for flags, message in [
-        (["--teachers", "fixed", "--teacher-param", "curot.start=easiest"], "no teacher kind 'curot'"),
-        (["--teachers", "currot", "--teacher-param", "currot.start=middle"], "--teacher-param for currot"),
-        (["--teachers", "adr", "fixed", "--teacher-param", "adr.step=2"], "--teacher-param for adr"),
-        (["--teachers", "riac", "--teacher-param", "fit_rate=100"], "--teacher-param for riac"),
+        (["--teachers", "fixed", "--teacher-param", "curot.start=easiest"], "no teacher kind 'curot'; known: adr,"),
+        (
+            ["--teachers", "adr", "fixed", "--teacher-param", "adr.step=2"],
+            "--teacher-param for adr: step: Input should be less than or equal to 1",
+        ),
+        (["--teachers", "random", "plr"], "plr on KukaGrasp-v0: Value error, parameter 'rnd_obj_x' is a float"),
     ]:
         # A tiny budget, so that a regression trains for seconds before the test fails, not for hours.
         assert main(["bakeoff", "--out", str(tmp_path), "--seeds", "1", "--total-steps", "1", *flags]) == 2
-        assert message in capsys.readouterr().err
+        error = capsys.readouterr().err
+        assert message in error and len(error.strip().splitlines()) == 1, error
     assert not (tmp_path / "runs").exists() and not (tmp_path / "bakeoff.json").exists()
 
 
-def test_each_teacher_trains_with_its_own_parameters_and_plain_names_reach_every_teacher(tmp_path):
+@pytest.fixture(scope="module")
+def probe() -> Iterator[TeacherProbe]:
+    with teacher_probe() as probe:
+        yield probe
+
+
+def test_each_teacher_trains_with_its_own_parameters_and_plain_names_reach_every_teacher(tmp_path, probe):
     pairs = [("currot.start", "easiest"), ("currot.target", "hardest"), ("seed_note", 1), ("adr.step", 0.2)]
     teachers = ["currot", "adr", "fixed"]
-    with pytest.raises(UsageError, match="(?s)for currot: .*seed_note"):  # no kind takes a seed_note
-        teacher_params_by_kind(pairs, teachers)
-    params = teacher_params_by_kind([pair for pair in pairs if pair[0] != "seed_note"], teachers)
+    with pytest.raises(UsageError, match="no teacher kind 'curot'"):
+        teacher_params_by_kind([("curot.start", "easiest")], teachers, probe.kinds)
+    with_note = teacher_params_by_kind(pairs, teachers, probe.kinds)
+    with pytest.raises(UsageError, match="^--teacher-param for currot: seed_note: Extra inputs are not permitted$"):
+        check_curricula(probe, with_note, "KukaGraspHard-v0", 1)  # no kind takes a seed_note
+    params = teacher_params_by_kind([pair for pair in pairs if pair[0] != "seed_note"], teachers, probe.kinds)
     assert params == {"currot": {"start": "easiest", "target": "hardest"}, "adr": {"step": 0.2}, "fixed": {}}
+    check_curricula(probe, params, "KukaGraspHard-v0", 1)
     # A kind that this invocation does not run keeps its parameters to itself.
-    assert teacher_params_by_kind(pairs[:2], ["fixed"]) == {"fixed": {}}
-    assert teacher_params_by_kind([("reward_range", [0, 1])], ["adr", "self-paced"]) == {
+    assert teacher_params_by_kind(pairs[:2], ["fixed"], probe.kinds) == {"fixed": {}}
+    assert teacher_params_by_kind([("reward_range", [0, 1])], ["adr", "self-paced"], probe.kinds) == {
         "adr": {"reward_range": [0, 1]},
         "self-paced": {"reward_range": [0, 1]},
     }
+    # The service's validators decide, on top of the family's parameters and over its task space.
+    with pytest.raises(UsageError, match="^--teacher-param for adr: Value error, reward_range must have low < high"):
+        check_curricula(probe, {"adr": {"reward_range": [1, 0]}}, "KukaGraspHard-v0", 1)
+    with pytest.raises(UsageError, match="^alp-gmm on MiniGrid-DoorKey-5x5-v0: .*takes float parameters only$"):
+        check_curricula(probe, {"plr": {"robust": True}, "alp-gmm": {}}, "MiniGrid-DoorKey-5x5-v0", 50)
 
     settings = {"env": "KukaGraspHard-v0", "ppo": {"update_epochs": 2}, "teacher_params": params} | {
         name: 1 for name in ("workers", "envs_per_worker", "rollout_length", "max_episode_steps")
