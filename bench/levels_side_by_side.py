@@ -134,7 +134,7 @@ def train_one(args: argparse.Namespace, kind: str, seed: int, run_dir: Path, tea
         task_source = UniformLevels(args.levels)
     else:
         # A resumed Syllabus run starts its curriculum afresh: Syllabus has no saved state to restore.
-        syllabus_actor = SyllabusCurriculum.options(name=name).remote(kind, args.levels, seed)  # type: ignore[attr-defined]
+        syllabus_actor = SyllabusCurriculum.options(name=name).remote(kind, args.levels, seed, config.batch_size)  # type: ignore[attr-defined]
         task_source = SyllabusLevels(name)
     trainer = Trainer(config, run_dir, teacher_url, name, resume_from=checkpoint, task_source=task_source)
     started = time.monotonic()
