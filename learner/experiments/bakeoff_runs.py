@@ -130,8 +130,7 @@ def check_curricula(probe: TeacherProbe, teacher_params: Mapping[str, dict[str, 
             raise UsageError(str(error)) from None
         refusal = probe.refusal(teacher, config.task_space(), config.teacher_params)
         if refusal is not None:
-            where = f"--teacher-param for {teacher}" if refusal.about_parameters else f"{teacher} on {env}"
-            raise UsageError(f"{where}: {refusal}")
+            raise UsageError(refusal.line(teacher, env))
 
 
 def further_finished_runs(out: Path, teacher: str, seeds: int, total_steps: int) -> list[Run]:

@@ -80,6 +80,12 @@ class Refusal:
             reasons.append(Reason(parameter, message))
         return cls(tuple(reasons), about_parameters)
 
+    def line(self, kind: str, env: str) -> str:
+        """The refusal for a command's user, in one line: what to change (a ``--teacher-param``, or the kind
+        on the environment ``env``), then the service's reasons."""
+        where = f"--teacher-param for {kind}" if self.about_parameters else f"{kind} on {env}"
+        return f"{where}: {self}"
+
     @property
     def messages(self) -> str:
         """The service's messages alone, for a caller that already names the parameter."""

@@ -34,6 +34,10 @@ def test_a_refusal_names_the_parameter_in_the_services_words(probe):
     refusal = probe.refusal("currot", KUKA_TASK_SPACE, {"start": "middle"})
     assert refusal is not None and refusal.about_parameters
     assert refusal.reasons == (Reason("start", "Input should be 'uniform' or 'easiest'"),)
+    assert (
+        refusal.line("currot", "KukaGrasp-v0")
+        == "--teacher-param for currot: start: Input should be 'uniform' or 'easiest'"
+    )
     assert str(probe.refusal("riac", KUKA_TASK_SPACE, {"fit_rate": 100})) == "fit_rate: Extra inputs are not permitted"
 
 
@@ -56,6 +60,7 @@ def test_a_kind_that_does_not_take_the_space_is_refused_for_the_space(probe):
     refusal = probe.refusal("plr", KUKA_TASK_SPACE, {})
     assert refusal is not None and not refusal.about_parameters
     assert "the plr teacher takes integer parameters only" in str(refusal)
+    assert refusal.line("plr", "KukaGrasp-v0").startswith("plr on KukaGrasp-v0: Value error, parameter 'rnd_obj_x'")
     unknown = probe.refusal("curot", KUKA_TASK_SPACE, {})
     assert unknown is not None and "'curot'" in str(unknown) and "'currot'" in str(unknown)
 
