@@ -46,6 +46,7 @@ from learner.experiments.tune_settings import (
 )
 from learner.experiments.tune_space import SearchSpace, SearchSpaceError, apply_settings
 from learner.job import session
+from learner.job.teacher_probe import TeacherProbe, teacher_probe
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -167,13 +168,15 @@ def run(args: argparse.Namespace) -> int:
 def _tune(args: argparse.Namespace) -> int:
     settings = _settings(args)
     try:
-        space = settings.space()
         base = settings.base_config()
-        _check_teacher_params(base)
-    except SearchSpaceError as error:
-        raise UsageError(f"{args.search_space or args.out / SETTINGS_FILE}: {error}") from None
     except ValueError as error:
         raise UsageError(str(error)) from None
+    with teacher_probe() as probe:  # the service says what the tuned kind takes, before anything starts
+        _check_teacher_params(probe, base)
+        try:
+            space = settings.space(probe.parameters(base.teacher, base.task_space()))
+        except SearchSpaceError as error:
+            raise UsageError(f"{args.search_space or args.out / SETTINGS_FILE}: {error}") from None
     if settings.trials * space.grid_size > MAX_TRIALS:
         raise UsageError(
             f"{settings.trials} trials × {space.grid_size} grid points is more than {MAX_TRIALS} trials; "
@@ -217,14 +220,13 @@ def _tune(args: argparse.Namespace) -> int:
     return 0 if report.best is not None else 1
 
 
-def _check_teacher_params(base: TrainConfig) -> None:
-    """The fixed teacher parameters (KUKA's and ``--teacher-param``), refused here rather than in every trial."""
-    from teacher_service.teachers import TEACHER_KINDS
-
-    try:
-        TEACHER_KINDS[base.teacher].Params.parse(base.teacher_params)
-    except ValueError as error:
-        raise UsageError(f"--teacher-param for {base.teacher}: {error}") from None
+def _check_teacher_params(probe: TeacherProbe, base: TrainConfig) -> None:
+    """The curriculum every trial starts from (the family's teacher parameters and ``--teacher-param``, over
+    its task space), registered with ``probe``'s throwaway service: what the service refuses is refused here,
+    with its reason, rather than in every trial."""
+    refusal = probe.refusal(base.teacher, base.task_space(), base.teacher_params, base.seed)
+    if refusal is not None:
+        raise UsageError(refusal.line(base.teacher, base.env))
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from learner.commands.config_file import ConfigFile
 from learner.core.config import TrainConfig
-from learner.experiments.tune_space import SearchSpace, parse_search_space
+from learner.experiments.tune_space import SearchSpace, TeacherParameters, parse_search_space
 
 SETTINGS_FILE = "tune.json"
 EXPERIMENT = "tune"
@@ -60,5 +60,6 @@ class TuneSettings:
         )
         return ConfigFile(ppo=self.ppo, teacher_params=self.teacher_params).applied_to(config)
 
-    def space(self) -> SearchSpace:
-        return parse_search_space(self.search_space, self.teacher)
+    def space(self, teacher: TeacherParameters) -> SearchSpace:
+        """The search space, checked; ``teacher`` is the tuned kind as the teacher service has it."""
+        return parse_search_space(self.search_space, teacher)

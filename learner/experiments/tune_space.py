@@ -11,21 +11,22 @@ combination where there are several grids), so a tune can compare settings side 
 A name is a ``PPOConfig`` field, a parameter of the tuned teacher kind, or a task-family option
 (``max_episode_steps``, the episode limit); a prefix (``ppo.``, ``teacher.``, ``env.``) picks one
 where a bare name would be ambiguous. Every value a distribution can draw is checked against the
-setting's own bounds: both ends of a range, every choice; the bounds are the ones ``PPOConfig``,
-``TrainConfig`` and the kind's parameter model enforce, so a refusal names the setting and the
-model's reason. Each value is checked on its own: a combination of values that a teacher's model
-refuses (two ratios adding up to more than 1) fails only the trials that draw it.
+setting's own bounds: both ends of a range, every choice; the bounds are the ones ``PPOConfig`` and
+``TrainConfig`` enforce, and for a teacher parameter the teacher service's, so a refusal names the
+setting and the reason. What the tuned kind takes is the service's to say (``TeacherParameters``,
+which ``learner.job.teacher_probe`` answers from a real service). Each value is checked on its own,
+the kind's defaults for its other parameters: a combination of values that the service refuses (two
+ratios adding up to more than 1) fails only the trials that draw it.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 from learner.commands.config_file import ConfigFile
 from learner.core.config import PPOConfig, TrainConfig
@@ -40,6 +41,24 @@ MAX_CHOICES = 100
 
 class SearchSpaceError(ValueError):
     """The search space file is unreadable, names an unknown setting, or reaches outside its bounds."""
+
+
+class TeacherParameters(Protocol):
+    """The tuned teacher kind's parameters as the teacher service has them (``teacher_probe.KindParameters``
+    asks a real one)."""
+
+    @property
+    def kind(self) -> str: ...
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The kind's parameter names, as ``GET /api/v1/teachers`` lists them."""
+        ...
+
+    def problem(self, name: str, value: Any) -> str | None:
+        """Why the service refuses ``value`` for the parameter ``name`` (the others at the kind's
+        defaults); None when it takes it."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -144,7 +163,8 @@ def _parse(text: str, path: Path) -> Any:
         raise ValueError(str(error)) from None
 
 
-def parse_search_space(raw: Any, teacher: str) -> SearchSpace:
+def parse_search_space(raw: Any, teacher: TeacherParameters) -> SearchSpace:
+    """The search space ``raw`` (``load_raw_search_space``'s) for a tune of ``teacher``, every value checked."""
     if not isinstance(raw, dict) or not raw:
         raise SearchSpaceError("expected a mapping of setting name to distribution, with at least one setting")
     dimensions = tuple(_dimension(str(name), spec, teacher) for name, spec in raw.items())
@@ -152,20 +172,14 @@ def parse_search_space(raw: Any, teacher: str) -> SearchSpace:
     repeated = sorted({key for key in keys if keys.count(key) > 1})
     if repeated:
         raise SearchSpaceError(f"{', '.join(repeated)} named more than once")
-    return SearchSpace(teacher, dimensions)
+    return SearchSpace(teacher.kind, dimensions)
 
 
-def _settings_by_target(teacher: str) -> dict[Target, tuple[str, ...]]:
-    from teacher_service.teachers import TEACHER_KINDS
-
-    return {
-        "ppo": tuple(f.name for f in fields(PPOConfig)),
-        "teacher": tuple(TEACHER_KINDS[teacher].Params.model_fields),
-        "env": TASK_FAMILY_OPTIONS,
-    }
+def _settings_by_target(teacher: TeacherParameters) -> dict[Target, tuple[str, ...]]:
+    return {"ppo": tuple(f.name for f in fields(PPOConfig)), "teacher": teacher.names, "env": TASK_FAMILY_OPTIONS}
 
 
-def _resolve(name: str, teacher: str) -> tuple[Target, str]:
+def _resolve(name: str, teacher: TeacherParameters) -> tuple[Target, str]:
     known = _settings_by_target(teacher)
     prefix, dot, rest = name.partition(".")
     if dot:
@@ -180,18 +194,18 @@ def _resolve(name: str, teacher: str) -> tuple[Target, str]:
     if not owners:
         raise SearchSpaceError(
             f"{name}: no such setting; expected a PPOConfig field ({', '.join(known['ppo'])}), a parameter of "
-            f"{teacher} ({', '.join(known['teacher'])}) or a task-family option ({', '.join(known['env'])})"
+            f"{teacher.kind} ({', '.join(known['teacher'])}) or a task-family option ({', '.join(known['env'])})"
         )
     if len(owners) > 1:
         raise SearchSpaceError(f"{name}: ambiguous; write {' or '.join(f'{owner}.{name}' for owner in owners)}")
     return owners[0], name
 
 
-def _describe(target: Target, teacher: str) -> str:
-    return {"ppo": "PPOConfig fields", "teacher": f"parameters of {teacher}", "env": "task-family options"}[target]
+def _describe(target: Target, teacher: TeacherParameters) -> str:
+    return {"ppo": "PPOConfig fields", "teacher": f"parameters of {teacher.kind}", "env": "task-family options"}[target]
 
 
-def _dimension(name: str, spec: Any, teacher: str) -> Dimension:
+def _dimension(name: str, spec: Any, teacher: TeacherParameters) -> Dimension:
     target, field_name = _resolve(name, teacher)
     if not isinstance(spec, dict) or len(spec) != 1:
         raise SearchSpaceError(f'{name}: expected one distribution, such as {{"uniform": [low, high]}}; got {spec!r}')
@@ -226,9 +240,11 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _value_problem(dimension: Dimension, value: Any, teacher: str) -> str | None:
-    """Why the setting cannot take ``value`` on its own, as its config or parameter model says; None if it can."""
+def _value_problem(dimension: Dimension, value: Any, teacher: TeacherParameters) -> str | None:
+    """Why the setting cannot take ``value`` on its own, as its config or the teacher service says; None if it can."""
     value = list(value) if isinstance(value, tuple) else value
+    if dimension.target == "teacher":
+        return teacher.problem(dimension.name, value)
     try:
         if dimension.target == "ppo":
             PPOConfig().with_overrides({dimension.name: value})
@@ -237,16 +253,6 @@ def _value_problem(dimension: Dimension, value: Any, teacher: str) -> str | None
                 return "a whole number is needed"
             options: dict[str, Any] = {dimension.name: value}
             replace(TrainConfig(), **options)
-        else:
-            from teacher_service.teachers import TEACHER_KINDS
-
-            TEACHER_KINDS[teacher].Params.parse({dimension.name: value})
     except ValueError as error:
-        return _first_line(error)
+        return " ".join(str(error).split()) or type(error).__name__
     return None
-
-
-def _first_line(error: ValueError) -> str:
-    """The reason alone: a pydantic error's last line, without its ``[type=...]`` details and link."""
-    lines = [line.strip() for line in str(error).splitlines() if line.strip() and "errors.pydantic.dev" not in line]
-    return re.sub(r"\s*\[type=.*\]$", "", lines[-1]) if lines else type(error).__name__

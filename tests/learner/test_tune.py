@@ -14,15 +14,18 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from common.kuka.task_space import KUKA_TASK_SPACE
 from kuka_curriculum import main
 from learner.commands.config_file import read_config_file
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.experiments.run_archive import metrics_records, resume_files, write_up_files
 from learner.experiments.tune_space import SearchSpaceError, parse_search_space
+from learner.job.teacher_probe import TeacherProbe, teacher_probe
 
 TRIAL_FLAGS = ["--workers", "1", "--envs-per-worker", "2", "--ppo", "rollout_length=256", "--eval-episodes", "1"]
 TOTAL_STEPS = 1024
@@ -32,6 +35,13 @@ SEARCH_SPACE = {
     "max_episode_steps": {"randint": [100, 150]},
 }
 TIMEOUT_S = 300
+
+
+@pytest.fixture(scope="module")
+def probe() -> Iterator[TeacherProbe]:
+    """A throwaway teacher service, which says what each kind takes."""
+    with teacher_probe() as probe:
+        yield probe
 
 
 def _tune_command(out: Path, space: Path, *extra: str) -> list[str]:
@@ -222,29 +232,36 @@ def test_a_trial_that_raises_is_recorded_failed_and_the_tune_goes_on(tmp_path):
         ({"learning_rate": {"loguniform": [0, 1e-3]}}, "learning_rate: loguniform needs low > 0"),
         ({"learning_rate": {"normal": [0, 1]}}, "learning_rate: unknown distribution 'normal'"),
         ({"teacher.gamma": {"choice": [0.5]}}, "teacher.gamma: no such setting; known parameters of alp-gmm"),
+        # Two numbers within bounds, as a JSON schema sees them: only the service's validator refuses them.
+        (
+            {"reward_range": {"choice": [[0, 10], [10, 0]]}},
+            "reward_range: cannot be (10, 0): Value error, reward_range must have low < high",
+        ),
         ({"gamma": {"grid": [0.9, 1.5]}}, "gamma: cannot be 1.5: gamma must be in [0, 1]"),
         ({"gamma": {"grid": []}}, "gamma: grid takes a list of 1 to 100 values"),
     ],
 )
-def test_a_bad_search_space_names_the_setting(space, message):
+def test_a_bad_search_space_names_the_setting(space, message, probe):
     with pytest.raises(SearchSpaceError) as refused:
-        parse_search_space(space, "alp-gmm")
+        parse_search_space(space, probe.parameters("alp-gmm", KUKA_TASK_SPACE))
     assert message in str(refused.value)
 
 
-def test_a_grid_runs_each_value_once_per_sample():
+def test_a_grid_runs_each_value_once_per_sample(probe):
     space = parse_search_space(
         {
             "lr_final_fraction": {"grid": [0.0, 0.3]},
             "state_dependent_std": {"grid": [False, True]},
             "learning_rate": {"loguniform": [1e-4, 1e-3]},
+            "delta": {"grid": [0.5, 1.0]},
         },
-        "currot",
+        probe.parameters("currot", KUKA_TASK_SPACE),
     )
-    assert space.grid_size == 4
+    assert space.grid_size == 8 and space.teacher == "currot"
     tune_space = space.param_space()
     assert tune_space["ppo.lr_final_fraction"] == {"grid_search": [0.0, 0.3]}
     assert tune_space["ppo.state_dependent_std"] == {"grid_search": [False, True]}
+    assert tune_space["teacher.delta"] == {"grid_search": [0.5, 1.0]}
 
 
 @pytest.mark.parametrize(
@@ -269,7 +286,25 @@ def test_a_refused_search_space_stops_the_command_before_anything_trains(tmp_pat
     out = tmp_path / "out"
     assert main(["tune", "--search-space", str(space), "--out", str(out), "--trials", "2"]) == 2
     error = capsys.readouterr().err
-    assert "fit_rate: cannot be 100000000" in error and str(space) in error
+    assert "fit_rate: cannot be 100000000: Input should be less than or equal to" in error and str(space) in error
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--teacher-param", "fit_rate=1"], "--teacher-param for alp-gmm: fit_rate: Input should be greater than or"),
+        (["--teacher", "plr"], "plr on KukaGrasp-v0: Value error, parameter 'rnd_obj_x' is a float parameter"),
+    ],
+)
+def test_a_curriculum_the_service_refuses_stops_the_tune_before_anything_trains(tmp_path, capsys, flags, message):
+    """The fixed teacher parameters and the kind, on the family's task space, as the service judges them."""
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps({"learning_rate": {"choice": [1e-4]}}), encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["tune", "--search-space", str(space), "--out", str(out), *flags]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1, error
     assert not out.exists()
 
 
