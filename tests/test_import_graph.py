@@ -185,3 +185,22 @@ def test_the_learner_core_stands_alone_and_only_the_dispatcher_loads_the_experim
             if not inside_core and target.startswith(LEARNER_MAY_NOT_IMPORT[layer]):
                 wrong.append(f"{module} imports {target}")
     assert not wrong, "imports against the learner's layers:\n" + "\n".join(sorted(wrong))
+
+
+SERVICE_LAUNCH = "teacher_service.process"
+"""The one module of the teacher service the learner may import: what starting it as a child process needs.
+The rest it learns from the service itself, over HTTP (``GET /api/v1/teachers``, a probe registration:
+``learner.job.teacher_probe``), and from the client's schemas, as any client of a service deployed apart must."""
+
+
+def test_the_learner_imports_of_the_service_only_what_starts_it():
+    wrong = []
+    for path in sources():
+        importer = module_name(path)
+        if room(importer) != "learner":
+            continue
+        for imported in first_party_imports(ast.parse(path.read_text())):
+            launches = imported == SERVICE_LAUNCH or imported.startswith(f"{SERVICE_LAUNCH}.")
+            if room(imported) == "teacher_service" and not launches:
+                wrong.append(f"{importer} imports {imported}")
+    assert not wrong, "the learner reaches into the service's internals:\n" + "\n".join(sorted(wrong))
