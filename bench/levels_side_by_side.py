@@ -34,9 +34,11 @@ Kaplan-Meier survival curves (runs that never take off censored at the budget), 
 Resumable: a finished run (its ``result.json``) is skipped; an unfinished run of ours resumes from its
 latest checkpoint (the service keeps its curriculum), an unfinished Syllabus run starts again from nothing
 (its curricula have no saved state). Runs go seed by seed, every arm on seed 0 first, so a partial table
-compares arms on the same seeds. ``bench/levels_plan.sh`` runs the whole plan unattended.
+compares arms on the same seeds. ``benchmarks/levels-minigrid/gamut-200/run.sh`` runs the whole plan
+unattended.
 
     .venv/bin/python bench/levels_side_by_side.py --out benchmarks/levels-minigrid/gamut-200 --seeds 0 1
+    .venv/bin/python bench/levels_side_by_side.py --out benchmarks/levels-minigrid/gamut-200 --throughput
 """
 
 from __future__ import annotations
@@ -178,6 +180,8 @@ PPO_SETTINGS = {
     "learning_rate": 0.0005,
 }
 """The MiniGrid settings of the docs' example (``docs/commands.md``)."""
+STEPS = 500_000
+"""Steps of budget per run, for a run of a few minutes on 2 cores (the plan in docs/results/levels.md)."""
 TAKE_OFF = 0.5
 """Held-out success at which a run has taken off: on the gamut, above the 3/8 the three tiers without a key
 can give, so a run there solves locked-door rooms."""
@@ -848,11 +852,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", required=True, help="where the runs and results go")
     parser.add_argument("--env", default=GAMUT_ENV_ID, choices=LEVEL_ENV_IDS)
     parser.add_argument("--levels", type=int, default=200, help="training levels (reset seeds 0 to N-1)")
-    parser.add_argument("--steps", type=int, default=1_000_000, help="steps of budget per run")
+    parser.add_argument("--steps", type=int, default=STEPS, help="steps of budget per run")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(20)))
     parser.add_argument("--kinds", nargs="+", default=None, choices=list(ARMS), help="arms (default: all but none)")
     parser.add_argument("--eval-every", type=int, default=25, help="iterations between in-run held-out evaluations")
-    parser.add_argument("--eval-episodes", type=int, default=48, help="held-out levels per in-run evaluation")
+    parser.add_argument("--eval-episodes", type=int, default=40, help="held-out levels per in-run evaluation")
     parser.add_argument("--test-levels", type=int, default=200, help="held-out levels of the final test")
     parser.add_argument("--test-repeats", type=int, default=2, help="episodes per held-out level in the final test")
     parser.add_argument("--take-off", type=float, default=TAKE_OFF, help="held-out success that counts as take-off")
