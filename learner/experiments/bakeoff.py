@@ -38,6 +38,7 @@ from learner.experiments.bakeoff_runs import (
     check_settings,
     evaluate_run,
     further_finished_runs,
+    kinds_for_family,
     plan_runs,
     teacher_params_by_kind,
     train_runs,
@@ -53,9 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--teachers",
         nargs="+",
         choices=TEACHERS,
-        default=list(TEACHERS),
         metavar="TEACHER",
-        help=f"teachers to compare (default: every kind, {' '.join(TEACHERS)})",
+        help=f"teachers to compare, of {' '.join(TEACHERS)} (default: every kind that takes the environment's "
+        "task space, as the service lists them)",
     )
     parser.add_argument(
         "--seeds",
@@ -136,9 +137,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _bakeoff(args: argparse.Namespace) -> int:
-    teachers = list(dict.fromkeys(args.teachers))
     settings = {name: getattr(args, name) for name in TRAINING_FLAGS} | {"total_steps": args.total_steps}
     with teacher_probe() as probe:  # the service says which kinds, parameters and spaces it takes
+        teachers = list(dict.fromkeys(args.teachers or kinds_for_family(probe, args.env, args.levels)))
         teacher_params = teacher_params_by_kind(args.teacher_params, teachers, probe.kinds)
         check_curricula(probe, teacher_params, args.env, args.levels)
     settings |= {"ppo": dict(args.ppo), "teacher_params": teacher_params}

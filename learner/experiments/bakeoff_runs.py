@@ -29,7 +29,7 @@ from common.kuka import ENV_ID
 from common.levels import DEFAULT_LEVELS
 from learner.commands.arguments import UsageError
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
-from learner.core.config import TrainConfig
+from learner.core.config import TEACHERS, TrainConfig
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
 from learner.experiments.run_archive import (
@@ -116,6 +116,18 @@ def teacher_params_by_kind(
         for teacher in ([kind] if kind in params else []) if dot else teachers:
             params[teacher][name] = value
     return params
+
+
+def kinds_for_family(probe: TeacherProbe, env: str, levels: int) -> list[str]:
+    """The kinds the service accepts over the family's task space with the family's parameters: a bake-off's
+    default teachers (KUKA's box refuses the level kinds; a level space refuses the kinds that need a hardest
+    or easiest point)."""
+    configs = {kind: TrainConfig(teacher=kind, env=env, levels=levels) for kind in TEACHERS if kind in probe.kinds}
+    return [
+        kind
+        for kind, config in configs.items()
+        if probe.refusal(kind, config.task_space(), config.teacher_params) is None
+    ]
 
 
 def check_curricula(probe: TeacherProbe, teacher_params: Mapping[str, dict[str, Any]], env: str, levels: int) -> None:

@@ -11,6 +11,8 @@ import pytest
 from common.client.schemas import TEACHER_LABELS
 from common.client.write_token import TOKEN_VARIABLE
 from common.kuka.task_space import KUKA_TASK_SPACE
+from learner.core.config import TrainConfig
+from learner.experiments.bakeoff_runs import kinds_for_family
 from learner.job.teacher_probe import Reason, TeacherProbe, UnknownTeacherKind, teacher_probe
 
 
@@ -79,3 +81,13 @@ def test_the_probe_service_is_private_and_gone_after_the_block(monkeypatch, tmp_
     with pytest.raises(httpx.TransportError):
         httpx.get(f"{probe.url}/healthz", timeout=1.0)
     assert not list(tmp_path.iterdir())
+
+
+def test_a_bakeoffs_default_teachers_are_the_kinds_the_service_takes_for_the_family(probe):
+    """Over KUKA's float box, every kind but the two that take levels only; over levels, the level kinds and random, not
+    the kinds that need a hardest or easiest point a level space does not define."""
+    kuka = kinds_for_family(probe, "KukaGrasp-v0", TrainConfig().levels)
+    assert {"alp-gmm", "currot", "fixed", "manual", "random"} <= set(kuka)
+    assert not {"plr", "learning-progress"} & set(kuka)
+    levels = kinds_for_family(probe, "MiniGrid-DoorKey-8x8-v0", 50)
+    assert set(levels) == {"random", "plr", "learning-progress", "learnability"}
