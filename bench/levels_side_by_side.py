@@ -25,7 +25,7 @@ none of their layouts occurs among the training levels, which ``results.json`` c
 Per run (``runs/<arm>-seed<seed>/result.json``): held-out success (by tier on the gamut), return, CVaR10, the
 in-run curve, the budget step of take-off (the first in-run evaluation at ``--take-off`` held-out success or
 more), the steps played, trained and charged, the PLR sweep's end, the Syllabus actor's state, steps/s, the
-commit and the UTC times. ``--summarise`` (run after each run) writes ``results.json`` with every run, the
+commit and the UTC times. ``--summarise`` (also run after each seed) writes ``results.json`` with every run, the
 command, machine and dates, the rliable figures of ``learner.experiments.run_statistics`` (IQM and mean with
 stratified bootstrap intervals, the share of runs that take off, P(improvement) of every arm over uniform
 and of each of ours over its Syllabus counterpart, the performance profile), steps-to-take-off as
@@ -188,6 +188,8 @@ can give, so a run there solves locked-door rooms."""
 CVAR_SHARE = 0.1
 WARM_UP_ITERATIONS = 5
 """Iterations at a run's start left out of its steps/s: Ray and the workers are still starting."""
+PROGRESS_REPS = 1000
+"""Bootstrap resamples of the summaries written between seeds (results.json records how many it used)."""
 NOTES_FILE = "notes.json"
 RESULT_FILE = "result.json"
 DEFAULTS = TrainConfig()
@@ -470,7 +472,9 @@ def run_all(args: argparse.Namespace) -> None:
                     f"{result['take_off_step'] or 'none'}, {counters.steps:_} steps played"
                 )
                 archive_run(run_dir)
-                summarise(args)
+            # Once a seed, a progress summary on fewer resamples (each bootstraps every figure afresh, minutes at
+            # 10,000); the plan's last command, --summarise, writes the figures with --reps.
+            summarise(argparse.Namespace(**{**vars(args), "reps": min(args.reps, PROGRESS_REPS)}))
 
 
 def kaplan_meier(times: Sequence[float | None], censored_at: float, confidence: float = 0.95) -> dict[str, Any]:
@@ -508,11 +512,12 @@ def kaplan_meier(times: Sequence[float | None], censored_at: float, confidence: 
 
 
 def load_runs(out: Path) -> dict[str, list[dict[str, Any]]]:
-    """Every finished run on disk, by arm, in seed order."""
+    """Every finished run on disk, by arm, in seed order (runs of the first side-by-side's driver, which
+    recorded no budget, are not read: ``benchmarks/levels-minigrid/doorkey-8x8`` keeps its own summary)."""
     runs: dict[str, list[dict[str, Any]]] = {}
     for kind in ARMS:
         found = [json.loads(path.read_text()) for path in (out / "runs").glob(f"{kind}-seed*/{RESULT_FILE}")]
-        found = [run for run in found if run["kind"] == kind]
+        found = [run for run in found if run["kind"] == kind and "budget_spent" in run]
         if found:
             runs[kind] = sorted(found, key=lambda run: run["seed"])
     return runs
