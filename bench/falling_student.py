@@ -62,6 +62,12 @@ Then which moves first. The decision rule, fixed before any real run was read:
    linear trends (per million steps) of the evaluations, the own-task success, ``D`` and each parameter are
    listed, as the failed runs of issue 80 were told apart by them.
 
+Post hoc, added after the first reading of the live screen run and not part of the rule (``post_hoc`` in
+the JSON): the same own-task test on the windows of the last half of the steps alone (once the teacher is
+near its target, ``D``'s changes are small beside the early descent's, which the whole run's test weighs
+most), and with the alignment margin's mean (task units, degrees) in place of ``D``, whole run and last
+half. Four more tests at 5%, read as description.
+
 What it cannot tell: Granger precedence at the resolution of a window is not cause; a teacher that
 answers within a window (CURROT updates every 50 results) shows only at lag 0, which step 2 leaves out;
 20-episode evaluations every 102,400 steps are noisy, so the secondary test has little power.
@@ -555,6 +561,22 @@ def analyse(run: Run, size: int = WINDOW) -> Analysis:
     )
 
 
+def post_hoc(analysis: Analysis) -> dict[str, Any]:
+    """The docstring's post hoc tests: the own-task rule on the last half's windows, and with ``TRACKED`` in
+    place of the distance."""
+    run, grid = analysis.run, analysis.grid
+    late = grid.step >= run.last_step / 2
+    signals = {"distance": grid.distance}
+    if TRACKED in run.space.names:
+        signals[TRACKED] = grid.values[:, run.space.names.index(TRACKED)]
+    result: dict[str, Any] = {"last_half_windows": int(late.sum())}
+    for name, signal in signals.items():
+        if name != "distance":
+            result[f"{name}_whole_run"] = verdict_json(decide(signal, grid.success, LAGS))
+        result[f"{name}_last_half"] = verdict_json(decide(signal[late], grid.success[late], LAGS))
+    return result
+
+
 def last_half(analysis: Analysis) -> dict[str, Any]:
     """Linear trends over the second half of the steps trained so far, and the last tenth's means."""
     run, grid = analysis.run, analysis.grid
@@ -610,6 +632,7 @@ def summary(analysis: Analysis) -> dict[str, Any]:
             **analysis.eval_events,
         },
         "last_half": last_half(analysis),
+        "post_hoc": post_hoc(analysis),
         "series": {
             "step": rounded(grid.step, 0),
             "distance": rounded(grid.distance),
@@ -628,8 +651,9 @@ def plot(analysis: Analysis, out: Path) -> Path:
     figure = Figure(figsize=(12, 10), layout="constrained")
     top, middle, bottom = figure.subplots(3, 1, height_ratios=(3, 3, 2))
     top.plot(grid.step, grid.distance, color="tab:blue", label="distance to target (unit, mean)")
-    top.set_ylabel("distance to target (unit)", color="tab:blue")
-    top.set_ylim(bottom=0)
+    top.set_ylabel("distance to target (unit, log)", color="tab:blue")
+    if len(grid.distance) and grid.distance.min() > 0:
+        top.set_yscale("log")  # near the target the late changes are a hundredth of the early descent's
     if TRACKED in run.space.names:
         column = run.space.names.index(TRACKED)
         right = top.twinx()
@@ -652,7 +676,7 @@ def plot(analysis: Analysis, out: Path) -> Path:
         axes.set_xlim(0, max(run.last_step, 1))
     middle.plot([], [], color="tab:red", linestyle="--", label="own-task fall")
     middle.plot([], [], color="tab:purple", linestyle=":", label="evaluation fall")
-    middle.legend(loc="upper left", fontsize="small")
+    middle.legend(loc="lower right", fontsize="small")
     middle.set_xlabel("environment steps")
     top.set_title(
         f"{run.name}: {len(run.success):_} results to step {run.last_step:_}"
@@ -710,7 +734,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             continue
         analysis = analyse(run, args.window)
         entry = summary(analysis)
-        entry["plot"] = plot(analysis, args.out).name
+        entry["plot"] = plot(analysis, args.out).name if len(analysis.grid.step) else None
         entries.append(entry)
     document = {
         "generated": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

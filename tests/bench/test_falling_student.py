@@ -17,6 +17,7 @@ import pytest
 from bench.falling_student import (
     EVAL_LAGS,
     LAGS,
+    VERDICTS,
     WINDOW,
     decide,
     falls,
@@ -168,6 +169,7 @@ def test_a_run_is_told_which_moved_first(scenario: str, verdict: str, tmp_path: 
     # The distance ignores the free shaping: the other nine parameters, each `share` of the unit way.
     assert np.allclose(entry["series"]["distance"], 3 * share, rtol=0.06, atol=0.05)
     assert np.allclose(entry["series"]["own_success"], own, atol=0.006)
+    assert entry["post_hoc"]["align_margin_whole_run"]["verdict"] in VERDICTS
     assert entry["target"].startswith('target_box {"shaping": [0.0, 1.0]}')
     assert sorted(path.name for path in (tmp_path / "out").iterdir()) == [f"{run_dir.name}.png", "summary.json"]
     assert json.loads((tmp_path / "out" / "summary.json").read_text()) == json.loads(json.dumps(document))
