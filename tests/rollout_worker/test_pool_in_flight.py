@@ -44,7 +44,9 @@ class Slots:
 
 @pytest.fixture()
 def fast_and_slow(ray_cluster: str) -> Iterator[Slots]:
-    slots = Slots([Clock.remote(0.05), Clock.remote(1.0)])
+    # The slow call is long enough that a loaded machine (two test processes beside a training run) cannot
+    # delay the fast slot's next call past its end by scheduling alone.
+    slots = Slots([Clock.remote(0.05), Clock.remote(3.0)])
     yield slots
     for worker in slots.workers:
         ray.kill(worker)
