@@ -44,8 +44,13 @@ check: $(STAMP) lock-check large-files
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy
 
+# The tests that need no Docker on TEST_WORKERS processes (pytest-xdist; a file's tests stay together, so a
+# module's service or Ray run is set up once), which overlap one test's waiting with another's computing;
+# then the Docker tests, one after another on the one stack they share (tests/docker_stack.py).
+TEST_WORKERS ?= 2
 test: check
-	$(VENV)/bin/pytest
+	$(VENV)/bin/pytest --numprocesses $(TEST_WORKERS) --dist loadfile -m "not docker"
+	$(VENV)/bin/pytest -m docker
 
 # The teacher client alone (client/, the distribution kuka-curriculum-client): its sdist and wheel in dist/,
 # to `pip install dist/kuka_curriculum_client-*.whl` where a trainer needs no torch, Ray or PyBullet.
