@@ -122,12 +122,8 @@ def kinds_for_family(probe: TeacherProbe, env: str, levels: int) -> list[str]:
     """The kinds the service accepts over the family's task space with the family's parameters: a bake-off's
     default teachers (KUKA's box refuses the level kinds; a level space refuses the kinds that need a hardest
     or easiest point)."""
-    configs = {kind: TrainConfig(teacher=kind, env=env, levels=levels) for kind in TEACHERS if kind in probe.kinds}
-    return [
-        kind
-        for kind, config in configs.items()
-        if probe.refusal(kind, config.task_space(), config.teacher_params) is None
-    ]
+    kinds = (kind for kind in TEACHERS if kind in probe.kinds)
+    return [kind for kind in kinds if probe.run_refusal(TrainConfig(teacher=kind, env=env, levels=levels)) is None]
 
 
 def check_curricula(probe: TeacherProbe, teacher_params: Mapping[str, dict[str, Any]], env: str, levels: int) -> None:
@@ -140,7 +136,7 @@ def check_curricula(probe: TeacherProbe, teacher_params: Mapping[str, dict[str, 
             config = TrainConfig(teacher=teacher, env=env, levels=levels, teacher_overrides=values)
         except ValueError as error:
             raise UsageError(str(error)) from None
-        refusal = probe.refusal(teacher, config.task_space(), config.teacher_params)
+        refusal = probe.run_refusal(config)
         if refusal is not None:
             raise UsageError(refusal.line(teacher, env))
 

@@ -224,7 +224,7 @@ def _check_teacher_params(probe: TeacherProbe, base: TrainConfig) -> None:
     """The curriculum every trial starts from (the family's teacher parameters and ``--teacher-param``, over
     its task space), registered with ``probe``'s throwaway service: what the service refuses is refused here,
     with its reason, rather than in every trial."""
-    refusal = probe.refusal(base.teacher, base.task_space(), base.teacher_params, base.seed)
+    refusal = probe.run_refusal(base)
     if refusal is not None:
         raise UsageError(refusal.line(base.teacher, base.env))
 

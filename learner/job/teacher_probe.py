@@ -27,6 +27,7 @@ from common.client.task_space import TaskSpace
 from common.client.teacher_client import TeacherClient, TeacherClientError, TeacherRequestError
 from common.client.write_token import TOKEN_VARIABLE
 from learner.commands.arguments import UsageError
+from learner.core.config import TrainConfig
 from teacher_service.process import ServiceProcess
 
 STARTUP_TIMEOUT_S = 60.0
@@ -136,6 +137,11 @@ class TeacherProbe:
                     return Refusal.from_detail(error.detail)
                 raise UsageError(f"the teacher service at {self.url} could not check a curriculum: {error}") from None
         return None
+
+    def run_refusal(self, config: TrainConfig) -> Refusal | None:
+        """``refusal`` of the curriculum a run of ``config`` registers (as ``session.register_curriculum`` does):
+        its kind over its family's task space, with the family's parameters and its overrides."""
+        return self.refusal(config.teacher, config.task_space(), config.teacher_params, config.seed)
 
     def parameters(self, kind: str, space: TaskSpace) -> KindParameters:
         """The kind's parameters over ``space``, each value to be checked on its own (``KindParameters``)."""
