@@ -46,8 +46,14 @@ class Counters:
     """Steps of score-only episodes (robust PLR's explorations): played and counted in ``steps``, not trained on."""
 
     def budget_spent(self, counted: str) -> int:
-        """The steps that count toward the budget: all played (``played``), or those trained on (``trained``)."""
-        return self.steps - self.score_only_steps if counted == "trained" else self.steps
+        """The steps so far that count toward the budget (``charged_steps``)."""
+        return charged_steps(self.steps, self.score_only_steps, counted)
+
+
+def charged_steps(steps: int, score_only_steps: int, counted: str) -> int:
+    """Of ``steps`` played, those that count toward the budget: all of them (``played``), or those trained on,
+    the score-only ones left out (``trained``)."""
+    return steps - score_only_steps if counted == "trained" else steps
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from pydantic import SecretStr
 
 from common.policy.actor_critic import PolicySnapshot
 from common.policy.trajectory import EpisodeStats, TrajectoryBatch
-from learner.core.checkpoint import Checkpoint, Counters, save_checkpoint
+from learner.core.checkpoint import Checkpoint, Counters, charged_steps, save_checkpoint
 from learner.core.config import TrainConfig
 from learner.core.metrics import MetricsLog
 from learner.core.periodic_evaluation import evaluation_metrics
@@ -181,7 +181,7 @@ class _IterationLoop:
     def _charge(self, batches: list[TrajectoryBatch]) -> int:
         """What ``batches`` add to the budget: every step, or those not score-only."""
         steps = sum(batch.num_steps for batch in batches)
-        return steps - _score_only_steps(batches) if self.config.budget_steps == "trained" else steps
+        return charged_steps(steps, _score_only_steps(batches), self.config.budget_steps)
 
     def run(self) -> None:
         trainer, asynchronous = self.trainer, self.config.loop == "async"
