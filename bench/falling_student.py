@@ -84,10 +84,7 @@ import argparse
 import contextlib
 import datetime
 import json
-import os
-import platform
 import sqlite3
-import subprocess
 import sys
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -100,6 +97,7 @@ from matplotlib.figure import Figure
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
+from bench.provenance import commit, machine  # noqa: E402
 from common.client.task_space import TaskSpace  # noqa: E402
 from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, unpacked  # noqa: E402
 from learner.job.teacher_process import DATABASE_FILE  # noqa: E402
@@ -706,15 +704,6 @@ def plot(analysis: Analysis, out: Path) -> Path:
     return path
 
 
-def commit() -> str | None:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=Path(__file__).parent
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-
-
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", type=Path, help="run directories (teacher.sqlite[.xz] and metrics.jsonl)")
@@ -740,7 +729,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "generated": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "command": " ".join(["bench/falling_student.py", *(argv if argv is not None else sys.argv[1:])]),
         "commit": commit(),
-        "machine": {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version()},
+        "machine": machine(),
         "rule": {
             "window_results": args.window,
             "lags": LAGS,

@@ -48,11 +48,8 @@ import contextlib
 import datetime
 import json
 import math
-import os
-import platform
 import shlex
 import shutil
-import subprocess
 import sys
 import time
 import uuid
@@ -65,6 +62,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.provenance import commit, machine  # noqa: E402
 from common.families.base import HELD_OUT_FIRST_SEED  # noqa: E402
 from common.levels import GAMUT_ENV_ID, LEVEL_ENV_IDS  # noqa: E402
 from learner.core.config import TrainConfig  # noqa: E402
@@ -237,29 +235,6 @@ def _utc_now() -> str:
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
-def _commit() -> str:
-    root = Path(__file__).resolve().parents[1]
-    code = ("bench", "common", "learner", "rollout_worker", "teacher_service")
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", *code], cwd=root, capture_output=True, text=True)
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
-
-
-def machine() -> dict[str, Any]:
-    """Where the runs ran: enough to tell one machine's figures from another's."""
-    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") if hasattr(os, "sysconf") else 0
-    return {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "memory_gib": round(memory / 2**30, 1),
-        "python": platform.python_version(),
-    }
-
-
 INVOCATIONS_FILE = "invocations.json"
 
 
@@ -268,7 +243,7 @@ def record_invocation(out: Path, mode: str) -> None:
     path = out / INVOCATIONS_FILE
     kept = json.loads(path.read_text()) if path.exists() else []
     command = shlex.join([sys.executable, *sys.argv])
-    kept.append({"mode": mode, "command": command, "started": _utc_now(), "commit": _commit(), "machine": machine()})
+    kept.append({"mode": mode, "command": command, "started": _utc_now(), "commit": commit(), "machine": machine()})
     path.write_text(json.dumps(kept, indent=1) + "\n")
 
 
@@ -463,7 +438,7 @@ def run_all(args: argparse.Namespace) -> None:
                     "steps_per_second": float(np.median(curve["steps_per_second"]))
                     if curve["steps_per_second"]
                     else None,
-                    "commit": _commit(),
+                    "commit": commit(),
                     **notes,
                 }
                 result_path.write_text(json.dumps(result, indent=1) + "\n")
