@@ -15,7 +15,7 @@ import functools
 from pathlib import Path
 
 from common.families import family_for
-from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
+from learner.commands.arguments import add_override_flags, int_at_least, int_between, positive_int, run_command
 from learner.commands.config_file import BakeoffConfigAction
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
@@ -45,6 +45,7 @@ from learner.experiments.bakeoff_runs import (
 )
 from learner.experiments.bakeoff_statistics import DEFAULT_BASELINE, TeacherResult
 from learner.experiments.run_archive import archive_run
+from learner.experiments.run_statistics import MAX_REPS, MIN_REPS, REPS
 from learner.job.teacher_probe import teacher_probe
 
 
@@ -82,6 +83,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"the teacher the report's probability of improvement compares every other with, seed by seed "
         f"(default {DEFAULT_BASELINE}: uniform random tasks); left out when it is not among the teachers. "
         "A report setting only: changing it retrains nothing",
+    )
+    parser.add_argument(
+        "--bootstrap-reps",
+        type=int_between(MIN_REPS, MAX_REPS),
+        default=REPS,
+        help=f"bootstrap resamples per interval of the run statistics (default {REPS:_}; {MIN_REPS} to "
+        f"{MAX_REPS:_}): fewer for a quick look. A report setting only, as --baseline",
     )
     evaluation = parser.add_argument_group("final evaluation (hardest task)")
     evaluation.add_argument(
@@ -178,7 +186,9 @@ def _bakeoff(args: argparse.Namespace) -> int:
             args.max_episode_steps,
         )
         print(f"scripted controller: {scripted.summary()}")
-    write_reports(args.out, results, settings, args.eval_episodes, args.eval_seed, scripted, args.baseline)
+    write_reports(
+        args.out, results, settings, args.eval_episodes, args.eval_seed, scripted, args.baseline, args.bootstrap_reps
+    )
     for name in (RESULTS_MARKDOWN, RESULTS_JSON, LEARNING_CURVES, PERFORMANCE_PROFILE, PLACEMENT_PLOT):
         print(args.out / name)
     return 0

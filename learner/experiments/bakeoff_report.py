@@ -412,11 +412,13 @@ def write_reports(
     seed: int,
     scripted: EvaluationResult | None = None,
     baseline: str = DEFAULT_BASELINE,
+    reps: int = REPS,
 ) -> None:
     """Every report file; ``scripted`` is the scripted controller on the same episode seeds, for beside the
-    teachers in the placement table; ``baseline`` the teacher the run statistics compare the others with."""
+    teachers in the placement table; ``baseline`` the teacher the run statistics compare the others with, with
+    ``reps`` bootstrap resamples per interval."""
     scores = seed_scores(results)
-    statistics = seed_statistics(scores, baseline)
+    statistics = seed_statistics(scores, baseline, reps)
     write_json(
         out / RESULTS_JSON,
         {

@@ -42,6 +42,8 @@ REPS = 10_000
 """Bootstrap resamples per interval. Over a few runs the bootstrap's distribution is a handful of values, and
 with fewer resamples a bound moves between neighbouring ones from one seed to the next; rliable's default for
 intervals, more again, would take minutes per bake-off (``docs/results/bakeoff-hard.md`` measures both)."""
+MIN_REPS, MAX_REPS = 100, 100_000
+"""The resamples a command may ask for: fewer make bounds that jump, more cost minutes per report."""
 SEED = 0
 PROFILE_POINTS = 101
 """Scores at which the performance profile is evaluated, evenly over [0, 1]."""

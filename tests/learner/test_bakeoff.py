@@ -76,7 +76,11 @@ TINY = [
     "1",
     "--ppo",
     "update_epochs=2",
+    "--bootstrap-reps",
+    "200",
 ]
+"""A tiny bake-off: one worker, short episodes, two PPO epochs, a few evaluation episodes, and 200 bootstrap
+resamples per interval where a report takes 10,000 (seconds of each report)."""
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -176,6 +180,7 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
     # The run statistics over seeds, against uniform random by default: one seed each, so no bootstrap bounds.
     statistics = results["run_statistics"]
     assert statistics["baseline"] == "random" and list(statistics["arms"]) == ["fixed", "random"]
+    assert statistics["reps"] == 200
     fixed_statistics = statistics["arms"]["fixed"]
     assert fixed_statistics["scores"] == [results["teachers"][0]["runs"][0]["success_rate"]]
     assert fixed_statistics["improvement_over_baseline"]["low"] is None
