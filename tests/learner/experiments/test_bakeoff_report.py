@@ -58,7 +58,7 @@ def test_a_report_over_the_level_kinds_names_them_from_the_one_registry(tmp_path
 
 def test_the_report_writes_the_run_statistics_beside_every_earlier_figure(tmp_path):
     results = teacher_results(tmp_path)
-    write_reports(tmp_path, results, SETTINGS, episodes=10, seed=0)
+    write_reports(tmp_path, results, SETTINGS, episodes=10, seed=0, reps=REPS)
     record = json.loads((tmp_path / "results.json").read_text())
     # The earlier format is all there, per seed included; the run statistics come under their own key.
     assert [entry["teacher"] for entry in record["teachers"]] == ["random", "plr", "learning-progress"]
