@@ -1,6 +1,6 @@
 """``kuka-curriculum tune`` with real parts: a real teacher service, a real Ray cluster, the real training loop.
 
-One tune of 3 tiny trials is interrupted (SIGINT) once its first trial has a checkpoint and then
+One tune of 2 tiny trials is interrupted (SIGINT) once its first trial has a checkpoint and then
 finished with ``--resume``; its outputs serve several tests, and its best.json feeds ``train
 --config``. A second tune whose every trial raises shows a failure is recorded and the tune goes
 on. The budgets are two batches of 512 steps and episodes end within 150 steps, so the trials are short.
@@ -29,6 +29,7 @@ from learner.job.teacher_probe import TeacherProbe, teacher_probe
 
 TRIAL_FLAGS = ["--workers", "1", "--envs-per-worker", "2", "--ppo", "rollout_length=256", "--eval-episodes", "1"]
 TOTAL_STEPS = 1024
+TRIALS = 2
 SEARCH_SPACE = {
     "learning_rate": {"loguniform": [1e-4, 1e-3]},
     "fit_rate": {"choice": [100, 250]},
@@ -69,12 +70,13 @@ def _run(command: list[str]) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
-    """A 3-trial tune, interrupted after its first checkpoint, then resumed to its end."""
+    """A 2-trial tune, interrupted after its first checkpoint, then resumed to its end: the first trial
+    resumes from its checkpoint and the second starts afresh."""
     root = tmp_path_factory.mktemp("tune")
     space = root / "space.json"
     space.write_text(json.dumps(SEARCH_SPACE), encoding="utf-8")
     out = root / "out"
-    command = _tune_command(out, space, "--trials", "3", "--total-steps", str(TOTAL_STEPS), "--max-concurrent", "1")
+    command = _tune_command(out, space, "--trials", str(TRIALS), "--total-steps", str(TOTAL_STEPS), "--max-concurrent", "1")
     interrupted = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + TIMEOUT_S
     while not list(out.glob("runs/*/checkpoints/step_*.pt")):
@@ -106,7 +108,7 @@ def test_the_resumed_tune_writes_every_trial_and_the_best(tuned):
     resumed, out = tuned["resumed"], tuned["out"]
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     report = json.loads((out / "trials.json").read_text(encoding="utf-8"))
-    assert len(report["trials"]) == 3
+    assert len(report["trials"]) == TRIALS
     assert report["searched"] == ["ppo.learning_rate", "teacher.fit_rate", "env.max_episode_steps"]
     statuses = {entry["status"] for entry in report["trials"]}
     assert statuses <= {"finished", "stopped early"} and "finished" in statuses
@@ -140,7 +142,7 @@ def test_the_resumed_tune_writes_every_trial_and_the_best(tuned):
 def test_resume_continues_the_interrupted_trial_from_its_checkpoint(tuned):
     """A trial restarted from nothing would log its first iteration twice."""
     run_dirs = sorted(tuned["out"].glob("runs/*"))
-    assert len(run_dirs) == 3
+    assert len(run_dirs) == TRIALS
     for run_dir in run_dirs:
         steps = [record["step"] for record in metrics_records(run_dir)]
         assert steps and steps.count(steps[0]) == 1, run_dir
