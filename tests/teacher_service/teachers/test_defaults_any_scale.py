@@ -23,7 +23,7 @@ UNIT_SQUARE = TaskSpace([Parameter(name, 0.0, 1.0, easiest=0.0, hardest=1.0) for
 CUBES = 10
 LEVEL_GRID = TaskSpace([Parameter(name, 0, CUBES - 1, type="integer") for name in ("x0", "x1")])
 """The same toy over levels, one level per cube, for the kinds that teach levels only."""
-EPISODES = 1500
+EPISODES = 1000
 DRAWS = 4000
 MOVED = 0.25
 """Least total variation that counts as a move."""
