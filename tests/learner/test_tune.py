@@ -76,7 +76,8 @@ def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     space = root / "space.json"
     space.write_text(json.dumps(SEARCH_SPACE), encoding="utf-8")
     out = root / "out"
-    command = _tune_command(out, space, "--trials", str(TRIALS), "--total-steps", str(TOTAL_STEPS), "--max-concurrent", "1")
+    budget = ("--trials", str(TRIALS), "--total-steps", str(TOTAL_STEPS), "--max-concurrent", "1")
+    command = _tune_command(out, space, *budget)
     interrupted = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + TIMEOUT_S
     while not list(out.glob("runs/*/checkpoints/step_*.pt")):
