@@ -18,6 +18,11 @@ from types import TracebackType
 
 import httpx
 
+PORT_TAKEN = "address already in use"
+"""uvicorn's words when the port it was given is bound by another process."""
+PORT_MOVES = 3
+"""Other ports a first start tries when the one chosen was taken before the child could bind it."""
+
 
 def free_port(host: str = "127.0.0.1") -> int:
     """A port that was free a moment ago (the OS picks it)."""
@@ -30,7 +35,9 @@ def free_port(host: str = "127.0.0.1") -> int:
 class ServiceProcess:
     """``kuka-curriculum serve`` on ``db``; ``start`` waits until ``/healthz`` answers.
 
-    The port is chosen once, so a restart (``kill`` then ``start``) serves at the same URL.
+    The port is chosen once, so a restart (``kill`` then ``start``) serves at the same URL. A port this
+    class chose can be taken by another process before the child binds it (the OS hands the same free
+    ports to everyone on the machine); the first start then moves to another one (``url`` says which).
     The child's output goes to ``log_path`` (next to the database by default). With
     ``own_session`` the child leaves the caller's session, so a Ctrl-C meant for the caller does
     not stop the service before the caller has delivered its last results.
@@ -49,10 +56,14 @@ class ServiceProcess:
         self.db = Path(db)
         self.host = host
         self.port = port or free_port(host)
+        self._may_move_port = port is None
+        """True until the service first answers at its port, if this class chose it."""
         self.env = {**os.environ, **(env or {})}
         self.log_path = log_path or self.db.with_suffix(".log")
         self.own_session = own_session
         self._process: subprocess.Popen[bytes] | None = None
+        self._log_start = 0
+        """Where the log stood when the child last launched."""
 
     @property
     def url(self) -> str:
@@ -75,6 +86,7 @@ class ServiceProcess:
         if self._process is not None and self._process.poll() is None:
             raise RuntimeError(f"the service at {self.url} is already running")
         self.db.parent.mkdir(parents=True, exist_ok=True)
+        self._log_start = self.log_path.stat().st_size if self.log_path.exists() else 0
         command = [
             sys.executable,
             "-m",
@@ -101,14 +113,21 @@ class ServiceProcess:
         if self._process is None:
             raise RuntimeError("the service was not launched")
         deadline = time.monotonic() + timeout
+        moves = PORT_MOVES
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
+                if self._may_move_port and moves > 0 and PORT_TAKEN in self._launch_log():
+                    moves -= 1
+                    self.port = free_port(self.host)
+                    self.launch()
+                    continue
                 raise RuntimeError(
                     f"the teacher service at {self.url} exited with code {self._process.returncode}:\n"
                     f"{self._log_tail()}"
                 )
             try:
                 if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
+                    self._may_move_port = False
                     return
             except httpx.TransportError:
                 pass
@@ -117,6 +136,12 @@ class ServiceProcess:
         raise RuntimeError(
             f"the teacher service did not answer {self.url}/healthz within {timeout:.0f} s:\n{self._log_tail()}"
         )
+
+    def _launch_log(self) -> str:
+        """What the child wrote to the log since its last launch."""
+        with self.log_path.open("rb") as log:
+            log.seek(self._log_start)
+            return log.read().decode(errors="replace")
 
     def _log_tail(self, lines: int = 30) -> str:
         return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
