@@ -99,6 +99,7 @@ from scipy import stats
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the checkout's packages
 from bench.provenance import commit, machine  # noqa: E402
 from common.client.task_space import TaskSpace  # noqa: E402
+from learner.core.checkpoint import latest_checkpoint, load_checkpoint  # noqa: E402
 from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, unpacked  # noqa: E402
 from learner.job.teacher_process import DATABASE_FILE  # noqa: E402
 from teacher_service.curriculum_spec import stored_spec  # noqa: E402
@@ -263,11 +264,23 @@ def load_run(run_dir: Path) -> Run:
         eval_steps=np.array([r["step"] for r in evaluations], dtype=np.int64),
         eval_success=np.array([r["eval/success_rate"] for r in evaluations], dtype=np.float64),
         last_step=int(kept[-1]["step"]),
-        finished=exists(run_dir / EVALUATION_FILE),
+        finished=trained_to_budget(run_dir),
         resumes=resumes,
         late_results=int((~within).sum()),
         database_read_at=read_at,
     )
+
+
+def trained_to_budget(run_dir: Path) -> bool:
+    """Whether the run is over: its bake-off evaluated it, or its last checkpoint holds its whole budget (a
+    screen's runs, evaluated into other files)."""
+    if exists(run_dir / EVALUATION_FILE):
+        return True
+    latest = latest_checkpoint(run_dir)
+    if latest is None:
+        return False
+    checkpoint = load_checkpoint(latest)
+    return checkpoint.counters.steps >= checkpoint.config.total_steps
 
 
 @dataclass

@@ -24,11 +24,17 @@ from bench.falling_student import (
     load_run,
     main,
     superseded_dropped,
+    trained_to_budget,
     windows,
 )
 from common.client.schemas import ParameterSpec
 from common.kuka.task_space import KUKA_HARD_V1_TASK_SPACE
+from learner.core.checkpoint import Counters, save_checkpoint
+from learner.core.config import PPOConfig, TrainConfig
 from learner.core.metrics import METRICS_FILE
+from learner.core.policy import policy_spec_for
+from learner.core.ppo import PPOLearner
+from learner.experiments.run_archive import EVALUATION_FILE
 from learner.job.teacher_process import DATABASE_FILE
 from teacher_service.curriculum_spec import SPEC_CLASSES
 from teacher_service.store import NewResult, NewTask, Store, StoredCurriculum
@@ -208,3 +214,19 @@ def test_a_run_shorter_than_the_lags_need_is_too_short(tmp_path: Path) -> None:
     run = load_run(tmp_path / "short")
     grid = windows(run, size=len(run.success) // 10)
     assert decide(grid.distance, grid.success, LAGS).verdict == "too short"
+
+
+def test_a_run_is_finished_once_its_last_checkpoint_holds_its_budget_or_its_bake_off_evaluated_it(tmp_path) -> None:
+    """A screen's runs are evaluated into files of their own name, so their checkpoint says they are over."""
+    config = TrainConfig(teacher="currot", total_steps=1024, ppo=PPOConfig(hidden_sizes=(8,)))
+    learner = PPOLearner(policy_spec_for(config.env, config.ppo), config.ppo, seed=0)
+    run_dir = tmp_path / "run"
+    assert not trained_to_budget(run_dir)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=1, steps=512), config)
+    assert not trained_to_budget(run_dir)
+    save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=2, steps=1024), config)
+    assert trained_to_budget(run_dir)
+    evaluated = tmp_path / "evaluated"
+    evaluated.mkdir()
+    (evaluated / EVALUATION_FILE).write_text("{}")
+    assert trained_to_budget(evaluated)
