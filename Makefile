@@ -45,9 +45,10 @@ check: $(STAMP) lock-check large-files
 	$(VENV)/bin/mypy
 
 # The tests that need no Docker on TEST_WORKERS processes (pytest-xdist; a file's tests stay together, so a
-# module's service or Ray run is set up once), which overlap one test's waiting with another's computing;
+# module's service or Ray run is set up once), which overlap one test's waiting with another's computing:
+# three on two cores, since each test process computes on one thread (tests/conftest.py) and waits often;
 # then the Docker tests, one after another on the one stack they share (tests/docker_stack.py).
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 test: check
 	$(VENV)/bin/pytest --numprocesses $(TEST_WORKERS) --dist loadfile -m "not docker"
 	$(VENV)/bin/pytest -m docker
