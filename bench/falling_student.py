@@ -272,15 +272,15 @@ def load_run(run_dir: Path) -> Run:
 
 
 def trained_to_budget(run_dir: Path) -> bool:
-    """Whether the run is over: its bake-off evaluated it, or its last checkpoint holds its whole budget (a
-    screen's runs, evaluated into other files)."""
+    """Whether the run is over: its bake-off evaluated it, or its last checkpoint holds its whole budget,
+    counted as the trainer counts it (``Counters.budget_spent``; a screen's runs, evaluated into other files)."""
     if exists(run_dir / EVALUATION_FILE):
         return True
     latest = latest_checkpoint(run_dir)
     if latest is None:
         return False
     checkpoint = load_checkpoint(latest)
-    return checkpoint.counters.steps >= checkpoint.config.total_steps
+    return checkpoint.counters.budget_spent(checkpoint.config.budget_steps) >= checkpoint.config.total_steps
 
 
 @dataclass

@@ -226,6 +226,11 @@ def test_a_run_is_finished_once_its_last_checkpoint_holds_its_budget_or_its_bake
     assert not trained_to_budget(run_dir)
     save_checkpoint(run_dir, learner.state_dict(), Counters(iteration=2, steps=1024), config)
     assert trained_to_budget(run_dir)
+    # A budget of the steps trained on leaves score-only steps out, as the trainer does.
+    charged = TrainConfig(teacher="currot", total_steps=1024, budget_steps="trained", ppo=config.ppo)
+    scored = tmp_path / "scored"
+    save_checkpoint(scored, learner.state_dict(), Counters(iteration=2, steps=1024, score_only_steps=256), charged)
+    assert not trained_to_budget(scored)
     evaluated = tmp_path / "evaluated"
     evaluated.mkdir()
     (evaluated / EVALUATION_FILE).write_text("{}")
