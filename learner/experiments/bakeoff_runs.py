@@ -92,9 +92,14 @@ class Run:
         return self.directory.name
 
     def steps_done(self) -> int:
-        """Environment steps in the run's latest checkpoint (0 before the first one)."""
+        """Steps of the budget spent by the run's latest checkpoint, counted as its trainer counts them
+        (``Counters.budget_spent``: every step played, or for a budget of trained steps, played less
+        score-only), so a run the trainer calls finished is never resumed; 0 before the first checkpoint."""
         path = latest_checkpoint(self.directory)
-        return load_checkpoint(path).counters.steps if path else 0
+        if path is None:
+            return 0
+        checkpoint = load_checkpoint(path)
+        return checkpoint.counters.budget_spent(checkpoint.config.budget_steps)
 
 
 def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:
