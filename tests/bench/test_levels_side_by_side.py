@@ -89,6 +89,13 @@ def test_each_run_sends_its_arms_score_and_counts_its_arms_budget() -> None:
     assert "no-curriculum" not in PLAN_ARMS and "no-curriculum" in parse_args(["--out", "x", "--throughput"]).kinds
 
 
+def test_a_resample_count_out_of_bounds_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    for reps in ("99", "100001"):
+        with pytest.raises(SystemExit) as exit_info:
+            parse_args(["--out", "unused", "--reps", reps])
+        assert exit_info.value.code == 2 and "--reps" in capsys.readouterr().err
+
+
 def test_take_off_is_the_first_evaluation_at_the_threshold() -> None:
     curve = {"steps": [100.0, 200.0, 300.0], "success": [0.2, 0.5, 0.9]}
     assert take_off_step(curve, 0.5) == 200.0
@@ -111,7 +118,7 @@ def test_the_driver_runs_and_reports_on_a_tiny_budget(tmp_path: Path, ray_cluste
     command = [
         *(sys.executable, "bench/levels_side_by_side.py", "--out", str(out), "--env", "MiniGrid-DoorKey-5x5-v0"),
         *("--levels", "4", "--steps", str(budget), "--seeds", "0", "--kinds", "robust-plr", "syllabus-learnability"),
-        *("--eval-every", "1", "--eval-episodes", "2", "--test-levels", "2", "--test-repeats", "1", "--reps", "50"),
+        *("--eval-every", "1", "--eval-episodes", "2", "--test-levels", "2", "--test-repeats", "1", "--reps", "100"),
         *("--ray-address", ray_cluster),
     ]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=Path(__file__).parents[2])
