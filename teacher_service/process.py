@@ -125,17 +125,26 @@ class ServiceProcess:
                     f"the teacher service at {self.url} exited with code {self._process.returncode}:\n"
                     f"{self._log_tail()}"
                 )
-            try:
-                if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
-                    self._may_move_port = False
-                    return
-            except httpx.TransportError:
-                pass
+            if self._answers():
+                self._may_move_port = False
+                return
             time.sleep(0.05)
         self.kill()
         raise RuntimeError(
             f"the teacher service did not answer {self.url}/healthz within {timeout:.0f} s:\n{self._log_tail()}"
         )
+
+    def _answers(self) -> bool:
+        """Whether this class's child answers ``/healthz``: another service that took the port first
+        answers too, with its own process id, while the child is still on its way to failing to bind."""
+        try:
+            response = httpx.get(f"{self.url}/healthz", timeout=1.0)
+            if response.status_code != 200:
+                return False
+            body = response.json()
+        except (httpx.TransportError, ValueError):
+            return False
+        return isinstance(body, dict) and body.get("pid") == self.pid
 
     def _launch_log(self) -> str:
         """What the child wrote to the log since its last launch."""

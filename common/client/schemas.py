@@ -248,6 +248,10 @@ class Health(BaseModel):
         default=None,
         description="Why no teacher model fits run any more (tasks are still served from the last models).",
     )
+    pid: int = Field(
+        description="The service's process id: a caller that started the service tells its own answer from "
+        "another service's that took the port first.",
+    )
 
 
 class ErrorMessage(BaseModel):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST
 
@@ -19,6 +21,7 @@ async def healthz(registry: RegistryDep) -> Health:
         curricula=len(registry),
         writes_failing=failing,
         fits_stopped=registry.fits_stopped,
+        pid=os.getpid(),
     )
 
 
