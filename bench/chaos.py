@@ -68,6 +68,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.provenance import commit, machine  # noqa: E402
+
 TOKEN = "chaos-bench-teacher-token"
 TEACHER_URL = "http://127.0.0.1:8000"
 RAY_DASHBOARD_URL = "http://127.0.0.1:8265/"
@@ -639,10 +641,6 @@ def restarts_by_cause(faults: list[dict[str, Any]], timeline: list[dict[str, Any
     return caused
 
 
-def memory_gib() -> int:
-    return round(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2**30)
-
-
 def summary(values: list[float]) -> dict[str, float | None]:
     return {
         "median": statistics.median(values) if values else None,
@@ -857,8 +855,8 @@ def run_chaos(stack: Stack, args: argparse.Namespace, argv: list[str]) -> dict[s
     report: dict[str, Any] = {
         "command": shlex.join(["bench/chaos.py", *argv]),
         "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "commit": run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], check=False).strip(),
-        "machine": {"cpus": os.cpu_count(), "memory_gib": memory_gib()},
+        "commit": commit(),
+        "machine": machine(),
         "settings": {k: v for k, v in settings.items() if k != "KC_TEACHER_TOKEN"} | {
             "duration_s": args.duration, "fault_every_s": args.fault_every, "seed": args.seed,
             "disk_full_at_s": disk_full_at, "disk_full_for_s": args.disk_full_for, "volume_mb": args.volume_mb,

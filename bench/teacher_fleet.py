@@ -35,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.provenance import commit, machine  # noqa: E402
 from bench.teacher_load import Connection, cpu_seconds, free_port, http_json, percentile_ms, wait_healthy  # noqa: E402
 from common.client.schemas import API_PREFIX, ParameterSpec  # noqa: E402
 from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
@@ -210,7 +211,8 @@ def main() -> int:
         "service_busy_cores": round(service_cpu / elapsed, 2),
         "generator_busy_cores": round(generator_cpu / elapsed, 2),
         "service_rss_mb": [round(memory_start, 0), round(memory_end, 0)],
-        "cores": os.cpu_count(),
+        "commit": commit(),
+        "machine": machine(),
         "load_average": round(os.getloadavg()[0], 1),
     }
     print(json.dumps(figures, indent=1))
