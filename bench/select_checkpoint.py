@@ -1,0 +1,130 @@
+"""Lever 5 of issue 80, read on finished runs: each run's validated policy, scored on a screen's episodes.
+
+For each run directory, its candidate checkpoints (``learner.evaluation.selection``: the first at or after
+3.0, 3.5, ... 5.5M steps and the final one) each play the validation episodes (200 hardest-point episodes from
+seed 200,000, deterministic, as ``kuka-curriculum evaluate`` plays them); the best is the run's policy, and it
+plays the screening episodes (500 from seed 20,000). Writes, per run, ``<out>/<run>/validation.json`` (every
+candidate's validation success and the choice) and ``<out>/<run>/evaluation-hardest.json.xz`` (the chosen
+policy's screening evaluation in ``evaluate --json``'s format, which ``bench/screen_report.py`` reads). A run
+whose files exist is skipped, so the command can be stopped and run again.
+
+    .venv/bin/python bench/select_checkpoint.py /work/wt-i80/runs/hard-screen-v1/currot-i80-steady-seed10{0,1,2,3} \\
+        --out benchmarks/bakeoff-hard/screening/i80-validated
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import lzma
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.provenance import commit, machine  # noqa: E402
+from learner.commands.arguments import int_between, positive_int  # noqa: E402
+from learner.core.checkpoint import load_checkpoint  # noqa: E402
+from learner.evaluation.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint  # noqa: E402
+from learner.evaluation.selection import (  # noqa: E402
+    EVERY,
+    FIRST_STEP,
+    VALIDATION_EPISODES,
+    VALIDATION_SEED,
+    Validated,
+    candidate_checkpoints,
+    checkpoint_steps,
+    choose,
+)
+
+SCREENING_SEED = 20_000
+SCREENING_EPISODES = 500
+MAX_EPISODES = 5_000
+"""The most episodes one evaluation may play (about 20 minutes of the machine a thousand)."""
+
+
+def play(path: Path, episodes: int, seed: int, processes: int | None) -> EvaluationResult:
+    """The checkpoint's deterministic policy on its family's evaluation task, as ``evaluate`` plays it."""
+    checkpoint = load_checkpoint(path)
+    task = checkpoint.config.family.evaluation_task(checkpoint.config.env, checkpoint.config.levels)
+    return evaluate_checkpoint(checkpoint, task, episodes, seed, processes, progress=False)
+
+
+def validate_run(run_dir: Path, out: Path, args: argparse.Namespace) -> dict[str, Any]:
+    """Choose the run's policy on the validation episodes, score it on the screening ones, and write both."""
+    validated = []
+    for path in candidate_checkpoints(run_dir, args.first_step, args.every):
+        result = play(path, args.validation_episodes, args.validation_seed, args.processes)
+        validated.append(Validated(path, checkpoint_steps(path), result.success_rate.estimate))
+        print(f"{run_dir.name}: {path.name} validation {validated[-1].success:.1%}", flush=True)
+    chosen = choose(validated)
+    screening = play(chosen.path, args.screening_episodes, args.screening_seed, args.processes)
+    checkpoint = load_checkpoint(chosen.path)
+    record = {
+        "checkpoint": str(chosen.path),
+        "steps": checkpoint.counters.steps,
+        "teacher": checkpoint.config.teacher,
+        **screening.to_dict(),
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    with lzma.open(out / "evaluation-hardest.json.xz", "wt", encoding="utf-8") as file:
+        json.dump(record, file)
+    summary = {
+        "run": str(run_dir),
+        "generated": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "commit": commit(),
+        "machine": machine(),
+        "rule": {
+            "first_step": args.first_step,
+            "every": args.every,
+            "validation_episodes": args.validation_episodes,
+            "validation_seed": args.validation_seed,
+            "choice": "the highest validation success; a tie goes to the later checkpoint",
+        },
+        "candidates": [
+            {"checkpoint": candidate.path.name, "steps": candidate.steps, "validation_success": candidate.success}
+            for candidate in validated
+        ],
+        "chosen": chosen.path.name,
+        "screening": {
+            "episodes": args.screening_episodes,
+            "seed": args.screening_seed,
+            "success_rate": screening.success_rate.to_dict(),
+        },
+    }
+    (out / "validation.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    return summary
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("runs", type=Path, nargs="+", help="finished run directories")
+    parser.add_argument("--out", type=Path, required=True, help="one folder per run is written here")
+    parser.add_argument("--first-step", type=positive_int, default=FIRST_STEP, help=f"default {FIRST_STEP:_}")
+    parser.add_argument("--every", type=positive_int, default=EVERY, help=f"default {EVERY:_}")
+    parser.add_argument(
+        "--validation-episodes", type=int_between(1, MAX_EPISODES), default=VALIDATION_EPISODES, help="default 200"
+    )
+    parser.add_argument("--validation-seed", type=int, default=VALIDATION_SEED, help=f"default {VALIDATION_SEED:_}")
+    parser.add_argument(
+        "--screening-episodes", type=int_between(1, MAX_EPISODES), default=SCREENING_EPISODES, help="default 500"
+    )
+    parser.add_argument("--screening-seed", type=int, default=SCREENING_SEED, help=f"default {SCREENING_SEED:_}")
+    parser.add_argument("--processes", type=positive_int, help="evaluation processes (default: one per CPU)")
+    args = parser.parse_args(argv)
+    for run_dir in args.runs:
+        out = args.out / run_dir.name
+        if (out / "validation.json").exists() and (out / "evaluation-hardest.json.xz").exists():
+            print(f"{run_dir.name}: done before, skipped")
+            continue
+        summary = validate_run(run_dir, out, args)
+        score = summary["screening"]["success_rate"]["estimate"]
+        print(f"{run_dir.name}: chose {summary['chosen']}, screening {score:.1%}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
