@@ -18,7 +18,9 @@
 # Variables: ENV_ID (KukaGraspHard-v0, the default, or KukaGraspHard-v1), LIST (another list of lines, such as
 # issue 80's screen-i80.txt, whose runs are kept under the same prefix), PYTHON (default .venv/bin/python),
 # OUT (default runs/hard-screen-v4 or runs/hard-screen-v1), SCREEN_EPISODES (the final evaluation's episodes,
-# default 100; issue 59's lines in screen-hard-v1.txt take 500).
+# default 100; issue 59's lines in screen-hard-v1.txt take 500), AFTER_RUN (a command given each finished run's
+# directory before the next run starts, so the machine does one thing at a time: issue 80's validated policy,
+# AFTER_RUN=".venv/bin/python bench/select_checkpoint.py --out benchmarks/bakeoff-hard/screening/i80-validated").
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PYTHON=${PYTHON:-.venv/bin/python}
@@ -44,6 +46,24 @@ next_configuration() {  # the first line of the list whose results are not yet c
     done < "$LIST"
 }
 
+after_run() {  # RUN_DIR: AFTER_RUN on a finished run, if set
+    if [ -n "${AFTER_RUN:-}" ]; then
+        echo "$(date -u +%FT%TZ) $(basename "$1"): $AFTER_RUN"
+        # shellcheck disable=SC2086  # the command is words to split
+        $AFTER_RUN "$1" >> "$1.log" 2>&1
+    fi
+}
+
+# Runs finished before this invocation get AFTER_RUN too (a command that skips what it has done, as
+# bench/select_checkpoint.py does, makes this cheap), so a screen stopped between a run and its AFTER_RUN
+# loses nothing.
+while read -r name rest; do
+    case "$name" in '' | '#'*) continue ;; esac
+    if [ -f "$HERE/screening/$PREFIX-$name/evaluation-hardest.json" ] && [ -d "$OUT/$name" ]; then
+        after_run "$OUT/$name"
+    fi
+done < "$LIST"
+
 while line=$(next_configuration) && [ -n "$line" ]; do
     read -r name teacher steps seed flags <<< "$line"
     # shellcheck disable=SC2086  # the flags are words to split
@@ -55,5 +75,6 @@ while line=$(next_configuration) && [ -n "$line" ]; do
     cp "$OUT/$name/metrics.jsonl" "$kept/"
     "$PYTHON" -c 'import sys; from pathlib import Path; from learner.experiments.run_archive import thin_metrics; thin_metrics(Path(sys.argv[1]))' "$kept/metrics.jsonl"
     cp "$OUT/$name/evaluation-hardest.json" "$kept/"
+    after_run "$OUT/$name"
 done
 echo "$(date -u +%FT%TZ) every configuration in $LIST is done"
