@@ -280,7 +280,7 @@ def trained_to_budget(run_dir: Path) -> bool:
     if latest is None:
         return False
     checkpoint = load_checkpoint(latest)
-    return checkpoint.counters.budget_spent(checkpoint.config.budget_steps) >= checkpoint.config.total_steps
+    return checkpoint.budget_spent >= checkpoint.config.total_steps
 
 
 @dataclass

@@ -14,6 +14,7 @@ one does; resuming from it stops with ``EvaluationOnlyCheckpointError``.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ import torch
 from learner.core.config import TrainConfig
 
 CHECKPOINT_DIR = "checkpoints"
+_STEP_FILE = re.compile(r"step_(\d+)\.pt")
 RESUME_ONLY_STATE = ("optimizer", "shuffle_rng")
 """The learner state that only resuming reads, which an evaluation-only checkpoint leaves out."""
 
@@ -64,6 +66,11 @@ class Checkpoint:
     config: TrainConfig
 
     @property
+    def budget_spent(self) -> int:
+        """The steps of the run's budget this checkpoint holds, counted as its trainer counts them."""
+        return self.counters.budget_spent(self.config.budget_steps)
+
+    @property
     def evaluation_only(self) -> bool:
         """Whether the optimiser's state and the shuffling RNG were left out (``save_evaluation_only``)."""
         return any(name not in self.learner for name in RESUME_ONLY_STATE)
@@ -72,6 +79,14 @@ class Checkpoint:
 def checkpoint_path(run_dir: Path, steps: int) -> Path:
     """Where a run's checkpoint at ``steps`` environment steps lies."""
     return Path(run_dir) / CHECKPOINT_DIR / f"step_{steps:010d}.pt"
+
+
+def checkpoint_steps(path: Path) -> int:
+    """The environment steps a checkpoint's file name records (``checkpoint_path``'s inverse)."""
+    match = _STEP_FILE.fullmatch(Path(path).name)
+    if match is None:
+        raise ValueError(f"{path}: not a checkpoint file (step_<steps>.pt)")
+    return int(match.group(1))
 
 
 def _write(data: dict[str, Any], path: Path) -> None:
@@ -96,9 +111,14 @@ def save_evaluation_only(source: Path, target: Path) -> Path:
     return Path(target)
 
 
+def run_checkpoints(run_dir: Path) -> list[Path]:
+    """The checkpoints in ``run_dir``, in step order (names sort by step count)."""
+    return sorted((Path(run_dir) / CHECKPOINT_DIR).glob("step_*.pt"))
+
+
 def latest_checkpoint(run_dir: Path) -> Path | None:
-    """The checkpoint with the most steps in ``run_dir``, if any (names sort by step count)."""
-    candidates = sorted((Path(run_dir) / CHECKPOINT_DIR).glob("step_*.pt"))
+    """The checkpoint with the most steps in ``run_dir``, if any."""
+    candidates = run_checkpoints(run_dir)
     return candidates[-1] if candidates else None
 
 

@@ -8,12 +8,11 @@ the episodes that then score the chosen policy stay untouched by the choice.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from learner.core.checkpoint import CHECKPOINT_DIR
+from learner.core.checkpoint import checkpoint_steps, run_checkpoints
 
 VALIDATION_SEED = 200_000
 """Where the validation episodes' seeds start: above the in-run evaluations' (10,000 to 99,999) and the final
@@ -23,8 +22,6 @@ FIRST_STEP = 3_000_000
 EVERY = 500_000
 """Steps between candidates."""
 VALIDATION_EPISODES = 200
-
-_STEP_FILE = re.compile(r"step_(\d+)\.pt")
 
 
 @dataclass(frozen=True)
@@ -36,20 +33,12 @@ class Validated:
     success: float
 
 
-def checkpoint_steps(path: Path) -> int:
-    """The environment steps a checkpoint's file name records."""
-    match = _STEP_FILE.fullmatch(path.name)
-    if match is None:
-        raise ValueError(f"{path}: not a checkpoint file (step_<steps>.pt)")
-    return int(match.group(1))
-
-
 def candidate_checkpoints(run_dir: Path, first_step: int = FIRST_STEP, every: int = EVERY) -> list[Path]:
     """For each of ``first_step``, ``first_step + every``, ... below the run's last checkpoint, its first
     checkpoint at or after that step, and its last checkpoint; in step order, each once."""
     if first_step < 0 or every < 1:
         raise ValueError(f"first_step must be at least 0 and every at least 1, got {first_step} and {every}")
-    found = sorted((checkpoint_steps(path), path) for path in (Path(run_dir) / CHECKPOINT_DIR).glob("step_*.pt"))
+    found = [(checkpoint_steps(path), path) for path in run_checkpoints(run_dir)]
     if not found:
         raise ValueError(f"{run_dir}: no checkpoints")
     last_steps, last = found[-1]

@@ -98,8 +98,7 @@ class Run:
         path = latest_checkpoint(self.directory)
         if path is None:
             return 0
-        checkpoint = load_checkpoint(path)
-        return checkpoint.counters.budget_spent(checkpoint.config.budget_steps)
+        return load_checkpoint(path).budget_spent
 
 
 def plan_runs(out: Path, teachers: Sequence[str], seeds: int) -> list[Run]:

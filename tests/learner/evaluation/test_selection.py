@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from learner.core.checkpoint import checkpoint_path
-from learner.evaluation.selection import Validated, candidate_checkpoints, checkpoint_steps, choose
+from learner.core.checkpoint import checkpoint_path, checkpoint_steps
+from learner.evaluation.selection import Validated, candidate_checkpoints, choose
 
 PERIOD = 81_920
 """A hard-family run's checkpoint period (20 iterations of 4,096 steps)."""
