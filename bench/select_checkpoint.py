@@ -27,8 +27,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.provenance import commit, machine  # noqa: E402
 from learner.commands.arguments import int_between, positive_int  # noqa: E402
-from learner.core.checkpoint import load_checkpoint  # noqa: E402
-from learner.evaluation.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint  # noqa: E402
+from learner.commands.checkpoint_arguments import checkpoint_task  # noqa: E402
+from learner.core.checkpoint import Checkpoint, checkpoint_steps, load_checkpoint  # noqa: E402
+from learner.evaluation.checkpoint_evaluation import (  # noqa: E402
+    EvaluationResult,
+    checkpoint_record,
+    evaluate_checkpoint,
+)
 from learner.evaluation.selection import (  # noqa: E402
     EVERY,
     FIRST_STEP,
@@ -36,7 +41,6 @@ from learner.evaluation.selection import (  # noqa: E402
     VALIDATION_SEED,
     Validated,
     candidate_checkpoints,
-    checkpoint_steps,
     choose,
 )
 
@@ -46,10 +50,9 @@ MAX_EPISODES = 5_000
 """The most episodes one evaluation may play (about 20 minutes of the machine a thousand)."""
 
 
-def play(path: Path, episodes: int, seed: int, processes: int | None) -> EvaluationResult:
+def play(checkpoint: Checkpoint, episodes: int, seed: int, processes: int | None) -> EvaluationResult:
     """The checkpoint's deterministic policy on its family's evaluation task, as ``evaluate`` plays it."""
-    checkpoint = load_checkpoint(path)
-    task = checkpoint.config.family.evaluation_task(checkpoint.config.env, checkpoint.config.levels)
+    task = checkpoint_task("hardest", checkpoint)
     return evaluate_checkpoint(checkpoint, task, episodes, seed, processes, progress=False)
 
 
@@ -57,21 +60,15 @@ def validate_run(run_dir: Path, out: Path, args: argparse.Namespace) -> dict[str
     """Choose the run's policy on the validation episodes, score it on the screening ones, and write both."""
     validated = []
     for path in candidate_checkpoints(run_dir, args.first_step, args.every):
-        result = play(path, args.validation_episodes, args.validation_seed, args.processes)
+        result = play(load_checkpoint(path), args.validation_episodes, args.validation_seed, args.processes)
         validated.append(Validated(path, checkpoint_steps(path), result.success_rate.estimate))
         print(f"{run_dir.name}: {path.name} validation {validated[-1].success:.1%}", flush=True)
     chosen = choose(validated)
-    screening = play(chosen.path, args.screening_episodes, args.screening_seed, args.processes)
     checkpoint = load_checkpoint(chosen.path)
-    record = {
-        "checkpoint": str(chosen.path),
-        "steps": checkpoint.counters.steps,
-        "teacher": checkpoint.config.teacher,
-        **screening.to_dict(),
-    }
+    screening = play(checkpoint, args.screening_episodes, args.screening_seed, args.processes)
     out.mkdir(parents=True, exist_ok=True)
     with lzma.open(out / "evaluation-hardest.json.xz", "wt", encoding="utf-8") as file:
-        json.dump(record, file)
+        json.dump(checkpoint_record(checkpoint, screening), file)
     summary = {
         "run": str(run_dir),
         "generated": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

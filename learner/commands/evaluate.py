@@ -22,6 +22,7 @@ from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import (
     EvaluationResult,
     available_cpus,
+    checkpoint_record,
     evaluate_checkpoint,
     evaluate_policy,
     scripted_record,
@@ -108,11 +109,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
     print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
     print(f"{result.summary()}{placement_line(result)}")
-    record = {
-        "checkpoint": str(checkpoint.path),
-        "steps": checkpoint.counters.steps,
-        "teacher": checkpoint.config.teacher,
-    }
+    record = checkpoint_record(checkpoint, result)
     if args.scripted:
         steps = args.max_episode_steps or checkpoint.config.max_episode_steps
         try:
@@ -125,5 +122,5 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"scripted controller, the same episodes: {scripted.summary()}{placement_line(scripted)}")
         record["scripted"] = scripted_record(scripted)
     if args.json is not None:
-        write_json(args.json, {**record, **result.to_dict()})
+        write_json(args.json, record)
     return 0

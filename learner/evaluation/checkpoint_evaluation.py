@@ -361,6 +361,16 @@ def evaluate_checkpoint(
     )
 
 
+def checkpoint_record(checkpoint: Checkpoint, result: EvaluationResult) -> dict[str, Any]:
+    """A checkpoint's evaluation as ``evaluate --json`` writes it: which checkpoint played, then the result."""
+    return {
+        "checkpoint": str(checkpoint.path),
+        "steps": checkpoint.counters.steps,
+        "teacher": checkpoint.config.teacher,
+        **result.to_dict(),
+    }
+
+
 def scripted_evaluation(
     cache: Path,
     env_id: str,
