@@ -16,6 +16,12 @@ import numpy as np
 from scipy.stats import binom, fisher_exact
 
 
+def fisher_one_sided(good: int, runs: int, baseline_good: int, baseline_runs: int) -> float:
+    """P-value of Fisher's exact test that an arm's share of good runs is above the baseline's."""
+    table = [[good, runs - good], [baseline_good, baseline_runs - baseline_good]]
+    return float(fisher_exact(table, alternative="greater").pvalue)
+
+
 def fisher_power(
     baseline: float, lever: float, runs: int, alpha: float = 0.05, baseline_runs: int | None = None
 ) -> float:
@@ -27,8 +33,7 @@ def fisher_power(
     power = 0.0
     for good_baseline in range(others + 1):
         for good_lever in range(runs + 1):
-            table = [[good_lever, runs - good_lever], [good_baseline, others - good_baseline]]
-            if fisher_exact(table, alternative="greater").pvalue <= alpha:
+            if fisher_one_sided(good_lever, runs, good_baseline, others) <= alpha:
                 power += weights[good_baseline, good_lever]
     return float(power)
 

@@ -34,6 +34,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.provenance import commit, machine  # noqa: E402
+from bench.screen_power import fisher_one_sided  # noqa: E402
 from learner.commands.arguments import int_between  # noqa: E402
 from learner.experiments.run_statistics import (  # noqa: E402
     MAX_REPS,
@@ -94,14 +95,6 @@ def read_arms(patterns: Mapping[str, Sequence[str]]) -> dict[str, list[RunScore]
     return arms
 
 
-def fisher_one_sided(good: int, runs: int, baseline_good: int, baseline_runs: int) -> float:
-    """P-value of Fisher's exact test that an arm's share of good runs is above the baseline's."""
-    from scipy.stats import fisher_exact
-
-    table = [[good, runs - good], [baseline_good, baseline_runs - baseline_good]]
-    return float(fisher_exact(table, alternative="greater").pvalue)
-
-
 def screen_report(
     arms: Mapping[str, Sequence[RunScore]], baseline: str, threshold: float, reps: int, seed: int
 ) -> dict[str, Any]:
@@ -110,14 +103,12 @@ def screen_report(
         raise ScreenError(f"baseline {baseline!r} is not among the arms ({', '.join(arms)})")
     scores = {arm: [run.score for run in runs] for arm, runs in arms.items()}
     figures = run_statistics(scores, baseline, threshold, reps, seed)
-    baseline_good = sum(score >= threshold for score in scores[baseline])
+    good = {arm: sum(score >= threshold for score in values) for arm, values in scores.items()}
     tests = {
         arm: {
-            "good_runs": sum(score >= threshold for score in values),
+            "good_runs": good[arm],
             "runs": len(values),
-            "fisher_one_sided_p": fisher_one_sided(
-                sum(score >= threshold for score in values), len(values), baseline_good, len(scores[baseline])
-            ),
+            "fisher_one_sided_p": fisher_one_sided(good[arm], len(values), good[baseline], len(scores[baseline])),
         }
         for arm, values in scores.items()
         if arm != baseline

@@ -35,11 +35,15 @@ mkdir -p "$OUT"
 # shellcheck source=benchmarks/bakeoff-hard/screen-steps.sh
 source "$HERE/screen-steps.sh"
 
+finished() {  # NAME: whether the run's results are copied
+    [ -f "$HERE/screening/$PREFIX-$1/evaluation-hardest.json" ]
+}
+
 next_configuration() {  # the first line of the list whose results are not yet copied
     local name
     while read -r name rest; do
         case "$name" in '' | '#'*) continue ;; esac
-        if [ ! -f "$HERE/screening/$PREFIX-$name/evaluation-hardest.json" ]; then
+        if ! finished "$name"; then
             echo "$name $rest"
             return
         fi
@@ -59,7 +63,7 @@ after_run() {  # RUN_DIR: AFTER_RUN on a finished run, if set
 # loses nothing.
 while read -r name rest; do
     case "$name" in '' | '#'*) continue ;; esac
-    if [ -f "$HERE/screening/$PREFIX-$name/evaluation-hardest.json" ] && [ -d "$OUT/$name" ]; then
+    if finished "$name" && [ -d "$OUT/$name" ]; then
         after_run "$OUT/$name"
     fi
 done < "$LIST"

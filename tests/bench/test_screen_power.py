@@ -1,10 +1,16 @@
-"""The screen's power calculation: exact, so a test can hold it to what the counting says."""
+"""The screen's test and its power calculation: exact, so a test can hold them to what the counting says."""
 
 from __future__ import annotations
 
 import pytest
 
-from bench.screen_power import fisher_power
+from bench.screen_power import fisher_one_sided, fisher_power
+
+
+def test_fishers_test_is_one_sided_on_the_good_runs() -> None:
+    # 3 good of 3 against 0 of 3: the one table of the six runs' 20 that is as extreme, so p = 1/20.
+    assert fisher_one_sided(3, 3, 0, 3) == pytest.approx(0.05)
+    assert fisher_one_sided(0, 3, 3, 3) == pytest.approx(1.0)
 
 
 def test_two_runs_an_arm_can_never_show_an_effect():

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.screen_report import ScreenError, fisher_one_sided, main, read_arms
+from bench.screen_report import ScreenError, main, read_arms
 
 
 def write_evaluation(path: Path, score: float, episodes: int = 500, seed: int = 20000) -> Path:
@@ -20,12 +20,6 @@ def write_evaluation(path: Path, score: float, episodes: int = 500, seed: int = 
     else:
         path.write_text(text)
     return path
-
-
-def test_fishers_test_is_one_sided_on_the_good_runs() -> None:
-    # 3 good of 3 against 0 of 3: the one table of the six runs' 20 that is as extreme, so p = 1/20.
-    assert fisher_one_sided(3, 3, 0, 3) == pytest.approx(0.05)
-    assert fisher_one_sided(0, 3, 3, 3) == pytest.approx(1.0)
 
 
 def test_a_screen_is_reported_from_its_files(tmp_path: Path) -> None:
