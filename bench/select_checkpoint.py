@@ -1,12 +1,13 @@
 """Lever 5 of issue 80, read on finished runs: each run's validated policy, scored on a screen's episodes.
 
-For each run directory, its candidate checkpoints (``learner.evaluation.selection``: the first at or after
-3.0, 3.5, ... 5.5M steps and the final one) each play the validation episodes (200 hardest-point episodes from
-seed 200,000, deterministic, as ``kuka-curriculum evaluate`` plays them); the best is the run's policy, and it
-plays the screening episodes (500 from seed 20,000). Writes, per run, ``<out>/<run>/validation.json`` (every
-candidate's validation success and the choice) and ``<out>/<run>/evaluation-hardest.json.xz`` (the chosen
-policy's screening evaluation in ``evaluate --json``'s format, which ``bench/screen_report.py`` reads). A run
-whose files exist is skipped, so the command can be stopped and run again.
+For each run directory, its candidate checkpoints (``learner.evaluation.selection``: from half the budget on,
+every twelfth of it, the first checkpoint at or after each mark, 3.0, 3.5, ... 5.5M steps of 6M; and the final
+one) each play the validation episodes (200 hardest-point episodes from seed 200,000, deterministic, as
+``kuka-curriculum evaluate`` plays them); the best is the run's policy, and it plays the screening episodes
+(500 from seed 20,000). Writes, per run, ``<out>/<run>/validation.json`` (every candidate's validation success
+and the choice) and ``<out>/<run>/evaluation-hardest.json.xz`` (the chosen policy's screening evaluation in
+``evaluate --json``'s format, which ``bench/screen_report.py`` reads). A run whose files exist is skipped, so
+the command can be stopped and run again. ``train --policy-choice validated`` makes the same choice in a run.
 
     .venv/bin/python bench/select_checkpoint.py /work/wt-i80/runs/hard-screen-v1/currot-i80-steady-seed10{0,1,2,3} \\
         --out benchmarks/bakeoff-hard/screening/i80-validated
@@ -28,20 +29,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.provenance import commit, machine  # noqa: E402
 from learner.commands.arguments import int_between, positive_int  # noqa: E402
 from learner.commands.checkpoint_arguments import checkpoint_task  # noqa: E402
-from learner.core.checkpoint import Checkpoint, checkpoint_steps, load_checkpoint  # noqa: E402
+from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint  # noqa: E402
 from learner.evaluation.checkpoint_evaluation import (  # noqa: E402
     EvaluationResult,
     checkpoint_record,
     evaluate_checkpoint,
 )
 from learner.evaluation.selection import (  # noqa: E402
-    EVERY,
-    FIRST_STEP,
     VALIDATION_EPISODES,
     VALIDATION_SEED,
     Validated,
-    candidate_checkpoints,
+    choice_record,
     choose,
+    schedule,
+    validate,
 )
 
 SCREENING_SEED = 20_000
@@ -58,13 +59,23 @@ def play(checkpoint: Checkpoint, episodes: int, seed: int, processes: int | None
 
 def validate_run(run_dir: Path, out: Path, args: argparse.Namespace) -> dict[str, Any]:
     """Choose the run's policy on the validation episodes, score it on the screening ones, and write both."""
-    validated = []
-    for path in candidate_checkpoints(run_dir, args.first_step, args.every):
-        result = play(load_checkpoint(path), args.validation_episodes, args.validation_seed, args.processes)
-        validated.append(Validated(path, checkpoint_steps(path), result.success_rate.estimate))
-        print(f"{run_dir.name}: {path.name} validation {validated[-1].success:.1%}", flush=True)
+    final = latest_checkpoint(run_dir)
+    if final is None:
+        raise SystemExit(f"{run_dir}: no checkpoints")
+    first_step, every = schedule(load_checkpoint(final).config.total_steps)
+    first_step, every = args.first_step or first_step, args.every or every
+    loaded: dict[Path, Checkpoint] = {}
+
+    def success(path: Path) -> float:
+        loaded[path] = load_checkpoint(path)
+        return play(loaded[path], args.validation_episodes, args.validation_seed, args.processes).success_rate.estimate
+
+    def on_candidate(candidate: Validated) -> None:
+        print(f"{run_dir.name}: {candidate.path.name} validation {candidate.success:.1%}", flush=True)
+
+    validated = validate(run_dir, first_step, every, success, on_candidate)
     chosen = choose(validated)
-    checkpoint = load_checkpoint(chosen.path)
+    checkpoint = loaded[chosen.path]
     screening = play(checkpoint, args.screening_episodes, args.screening_seed, args.processes)
     out.mkdir(parents=True, exist_ok=True)
     with lzma.open(out / "evaluation-hardest.json.xz", "wt", encoding="utf-8") as file:
@@ -74,18 +85,7 @@ def validate_run(run_dir: Path, out: Path, args: argparse.Namespace) -> dict[str
         "generated": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "commit": commit(),
         "machine": machine(),
-        "rule": {
-            "first_step": args.first_step,
-            "every": args.every,
-            "validation_episodes": args.validation_episodes,
-            "validation_seed": args.validation_seed,
-            "choice": "the highest validation success; a tie goes to the later checkpoint",
-        },
-        "candidates": [
-            {"checkpoint": candidate.path.name, "steps": candidate.steps, "validation_success": candidate.success}
-            for candidate in validated
-        ],
-        "chosen": chosen.path.name,
+        **choice_record(run_dir, validated, chosen, args.validation_episodes, args.validation_seed, first_step, every),
         "screening": {
             "episodes": args.screening_episodes,
             "seed": args.screening_seed,
@@ -100,8 +100,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("runs", type=Path, nargs="+", help="finished run directories")
     parser.add_argument("--out", type=Path, required=True, help="one folder per run is written here")
-    parser.add_argument("--first-step", type=positive_int, default=FIRST_STEP, help=f"default {FIRST_STEP:_}")
-    parser.add_argument("--every", type=positive_int, default=EVERY, help=f"default {EVERY:_}")
+    parser.add_argument("--first-step", type=positive_int, help="default: half the run's budget (learner's schedule)")
+    parser.add_argument("--every", type=positive_int, help="default: a twelfth of the run's budget")
     parser.add_argument(
         "--validation-episodes", type=int_between(1, MAX_EPISODES), default=VALIDATION_EPISODES, help="default 200"
     )

@@ -1,5 +1,5 @@
 """What ``evaluate`` and ``render`` read from their command line: a checkpoint (or a run directory's
-latest) and a task of the environment it was trained on. Bad input is a ``UsageError``.
+policy) and a task of the environment it was trained on. Bad input is a ``UsageError``.
 """
 
 from __future__ import annotations
@@ -11,7 +11,12 @@ from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.commands.arguments import UsageError
 from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
+from learner.evaluation.selection import recorded_choice
 
+CHECKPOINT_HELP = (
+    "a checkpoint file, or a run directory (its policy: the validated one where train chose one, else its latest "
+    "checkpoint)"
+)
 TASK_HELP = (
     "'hardest' (the evaluation setting of the checkpoint's environment: for KukaGrasp-v0 the book's, on a level "
     "space held-out levels), 'easiest', or name=value overrides on the hardest task, e.g. 'jp2=1.0,rnd_obj_ang=0.5' "
@@ -65,13 +70,15 @@ def checkpoint_task(text: str, checkpoint: Checkpoint) -> Task:
 
 
 def read_checkpoint(path: Path) -> Checkpoint:
-    """A checkpoint file as given, or the latest checkpoint of a run directory."""
+    """A checkpoint file as given, or a run directory's policy: its validated policy where the run recorded one
+    (``train --policy-choice validated``), else its latest checkpoint."""
     path = Path(path)
     if path.is_dir():
         latest = latest_checkpoint(path)
         if latest is None:
             raise UsageError(f"{path} is a directory without checkpoints (expected a run directory or a .pt file)")
-        path = latest
+        validated = recorded_choice(path)
+        path = latest if validated is None else validated.path
     elif not path.is_file():
         raise UsageError(f"no checkpoint at {path}")
     try:

@@ -17,7 +17,13 @@ from pathlib import Path
 from common.kuka import ENV_IDS, HARD_V1_ENV_ID
 from common.kuka.task_space import task_space_for
 from learner.commands.arguments import UsageError, positive_int, run_command
-from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, parse_task, read_checkpoint
+from learner.commands.checkpoint_arguments import (
+    CHECKPOINT_HELP,
+    TASK_HELP,
+    checkpoint_task,
+    parse_task,
+    read_checkpoint,
+)
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import (
     EvaluationResult,
@@ -28,6 +34,7 @@ from learner.evaluation.checkpoint_evaluation import (
     scripted_record,
 )
 from learner.evaluation.episode_diagnostics import success_by_band
+from learner.evaluation.selection import recorded_choice
 
 DEFAULT_MAX_STEPS = 1000
 """The scripted controller's episode limit when no checkpoint gives one: the environments' default."""
@@ -39,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         nargs="?",
         metavar="CHECKPOINT",
-        help="a checkpoint file, or a run directory (its latest checkpoint); may be left out with --scripted",
+        help=f"{CHECKPOINT_HELP}; may be left out with --scripted",
     )
     parser.add_argument("--episodes", type=positive_int, default=100, help="episodes to play (default 100)")
     parser.add_argument("--task", default="hardest", help=TASK_HELP)
@@ -107,7 +114,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise UsageError(f"--env {args.env}: the checkpoint was trained on {checkpoint.config.env}, where it is played")
     task = checkpoint_task(args.task, checkpoint)
     result = evaluate_checkpoint(checkpoint, task, args.episodes, args.seed, args.processes, args.max_episode_steps)
-    print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps)")
+    validated = args.checkpoint.is_dir() and recorded_choice(args.checkpoint) is not None
+    which = ", the run's validated policy" if validated else ""
+    print(f"{checkpoint.path} ({checkpoint.config.teacher}, {checkpoint.counters.steps:_} steps{which})")
     print(f"{result.summary()}{placement_line(result)}")
     record = checkpoint_record(checkpoint, result)
     if args.scripted:

@@ -27,7 +27,7 @@ from common.kuka import ENV_ID
 from common.levels import DEFAULT_LEVELS
 from common.policy.actor_critic import InferencePolicy, PolicySnapshot
 from learner.commands.arguments import UsageError, positive_int, run_command
-from learner.commands.checkpoint_arguments import TASK_HELP, checkpoint_task, read_checkpoint
+from learner.commands.checkpoint_arguments import CHECKPOINT_HELP, TASK_HELP, checkpoint_task, read_checkpoint
 from learner.core.policy import policy_snapshot
 
 FRAMES_PER_SECOND = 30.0
@@ -154,7 +154,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "checkpoint",
         type=Path,
         metavar="CHECKPOINT",
-        help="a checkpoint file, or a run directory (its latest checkpoint)",
+        help=CHECKPOINT_HELP,
     )
     parser.add_argument(
         "--out",

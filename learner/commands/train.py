@@ -29,7 +29,7 @@ from learner.commands.arguments import (
 )
 from learner.commands.config_file import read_config_file
 from learner.commands.training_flags import add_training_flags
-from learner.core.config import TEACHERS, TrainConfig
+from learner.core.config import POLICY_CHOICES, TEACHERS, TrainConfig
 from learner.job.session import (
     PUBLIC_URL_VARIABLE,
     check_ray_reachable,
@@ -80,6 +80,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a hard KUKA family's training placements: the share of far points drawn beyond the arm's x clamp "
         f"only; evaluations keep the task's draw (default {DEFAULTS.edge_placement_share})",
     )
+    run.add_argument(
+        "--policy-choice",
+        choices=POLICY_CHOICES,
+        help="the run's policy, which evaluate and render play when given the run: its last checkpoint, or "
+        "'validated', the best of its second half's checkpoints on 200 validation episodes, chosen when it "
+        f"finishes (default {DEFAULTS.policy_choice})",
+    )
     add_override_flags(run, "for this run")
     add_training_flags(run, defaults_given=False, level_families=True)
     where = parser.add_argument_group("where")
@@ -119,6 +126,7 @@ _RUN_SETTINGS = (
     "eval_episodes",
     "loop",
     "edge_placement_share",
+    "policy_choice",
 )
 """``TrainConfig`` fields settable by the flag of the same name."""
 
@@ -190,7 +198,13 @@ def _train(args: argparse.Namespace) -> int:
         register_curriculum(teacher_url, name, config, token)
         public_url = (args.public_url or os.environ.get(PUBLIC_URL_VARIABLE) or teacher_url).rstrip("/")
         connect_ray(args.ray_address, config.workers, stack)
-        return _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
+        code = _run_training(config, run_dir, teacher_url, f"{public_url}/curricula/{name}", name, token, checkpoint)
+    if code == 0 and config.policy_choice == "validated":
+        # after the workers and the teacher have stopped: the validation episodes take the machine
+        from learner.evaluation.selection import choose_validated_policy
+
+        choose_validated_policy(run_dir)
+    return code
 
 
 def _run_training(

@@ -156,6 +156,8 @@ same of a running service; a test holds the two equal). ``train`` takes any kind
 which registers the curriculum before anything starts, refuse one it does not know: a kind added to the
 service is one module and one line there, and trains at once."""
 LOOPS: tuple[Literal["async", "sync"], ...] = ("async", "sync")
+PolicyChoice = Literal["final", "validated"]
+POLICY_CHOICES: tuple[PolicyChoice, ...] = ("final", "validated")
 BudgetSteps = Literal["played", "trained"]
 BUDGET_STEPS: tuple[BudgetSteps, ...] = ("played", "trained")
 """What ``TrainConfig.total_steps`` counts: every step the workers played, or only the steps the updates
@@ -197,6 +199,8 @@ class TrainConfig:
     """async: workers sample the next batch, one update behind, while the learner updates; sync: on-policy, paused."""
     edge_placement_share: float = 0.0
     """Share of a hard KUKA family's far training placements drawn beyond the arm's x clamp (never evaluations')."""
+    policy_choice: PolicyChoice = "final"
+    """The run's policy: its last checkpoint, or its second half's best on validation episodes (``selection``)."""
     teacher_overrides: dict[str, Any] = field(default_factory=dict)
     """Teacher parameters on top of the family's (``TaskFamily.teacher_params``); the service validates them."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -226,6 +230,10 @@ class TrainConfig:
         )
         family.check_evaluation(self.env, self.eval_episodes, self.eval_seeds)
         _require(self.loop in LOOPS, f"loop must be one of {', '.join(LOOPS)}, got {self.loop!r}")
+        _require(
+            self.policy_choice in POLICY_CHOICES,
+            f"policy_choice must be one of {', '.join(POLICY_CHOICES)}, got {self.policy_choice!r}",
+        )
         _require(
             0.0 <= self.edge_placement_share <= 1.0,
             f"edge_placement_share must be between 0 and 1, got {self.edge_placement_share}",

@@ -4,24 +4,34 @@ A run's last checkpoint is not always its best: on the hard family a student can
 its teacher has reached the target (docs/results/student.md, lever 5). Choosing among checkpoints on episodes
 that no other evaluation plays is model selection, as Stable-Baselines3's ``EvalCallback`` keeps its best model;
 the episodes that then score the chosen policy stay untouched by the choice.
+
+``train --policy-choice validated`` makes the choice when a run finishes and records it in the run's
+``validated-policy.json``; ``evaluate`` and ``render`` then play the chosen checkpoint when given the run.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from learner.core.checkpoint import checkpoint_steps, run_checkpoints
+from learner.core.checkpoint import checkpoint_steps, latest_checkpoint, load_checkpoint, run_checkpoints
+from learner.core.json_file import write_json
 
 VALIDATION_SEED = 200_000
 """Where the validation episodes' seeds start: above the in-run evaluations' (10,000 to 99,999) and the final
 evaluations' (a screen's from 20,000, a bake-off's from 100,000), so no episode that scores a policy chose it."""
-FIRST_STEP = 3_000_000
-"""The earliest candidate: before it, on the hard family, CURROT is still moving the tasks."""
-EVERY = 500_000
-"""Steps between candidates."""
 VALIDATION_EPISODES = 200
+RECORD = "validated-policy.json"
+"""The choice, in the run directory: every candidate's validation success and the chosen checkpoint."""
+
+
+def schedule(total_steps: int) -> tuple[int, int]:
+    """The first candidate's step and the steps between candidates for a run's budget: its second half, every
+    twelfth of it (3M and 0.5M on the hard family's 6M, where CURROT is still moving the tasks before 3M)."""
+    return total_steps // 2, max(1, total_steps // 12)
 
 
 @dataclass(frozen=True)
@@ -33,7 +43,7 @@ class Validated:
     success: float
 
 
-def candidate_checkpoints(run_dir: Path, first_step: int = FIRST_STEP, every: int = EVERY) -> list[Path]:
+def candidate_checkpoints(run_dir: Path, first_step: int, every: int) -> list[Path]:
     """For each of ``first_step``, ``first_step + every``, ... below the run's last checkpoint, its first
     checkpoint at or after that step, and its last checkpoint; in step order, each once."""
     if first_step < 0 or every < 1:
@@ -58,3 +68,87 @@ def choose(validated: Sequence[Validated]) -> Validated:
     if not validated:
         raise ValueError("no candidates to choose from")
     return max(validated, key=lambda candidate: (candidate.success, candidate.steps))
+
+
+def validate(
+    run_dir: Path,
+    first_step: int,
+    every: int,
+    success: Callable[[Path], float],
+    on_candidate: Callable[[Validated], None] = lambda candidate: None,
+) -> list[Validated]:
+    """Every candidate checkpoint with its validation success (``success`` plays a checkpoint's file)."""
+    validated = []
+    for path in candidate_checkpoints(run_dir, first_step, every):
+        validated.append(Validated(path, checkpoint_steps(path), success(path)))
+        on_candidate(validated[-1])
+    return validated
+
+
+def choose_validated_policy(
+    run_dir: Path,
+    episodes: int = VALIDATION_EPISODES,
+    seed: int = VALIDATION_SEED,
+    processes: int | None = None,
+    report: Callable[[str], None] = print,
+) -> Validated:
+    """A finished run's validated policy, chosen by its budget's ``schedule`` and written to its ``RECORD``;
+    a record of the run as it stands is read, not made again."""
+    from learner.evaluation.checkpoint_evaluation import evaluate_checkpoint  # torch and the environments
+
+    current = recorded_choice(run_dir)
+    if current is not None:
+        return current
+    final = latest_checkpoint(run_dir)
+    if final is None:
+        raise ValueError(f"{run_dir}: no checkpoints")
+    first_step, every = schedule(load_checkpoint(final).config.total_steps)
+
+    def success(path: Path) -> float:
+        checkpoint = load_checkpoint(path)
+        task = checkpoint.config.evaluation_task()
+        result = evaluate_checkpoint(checkpoint, task, episodes, seed, processes, progress=False)
+        return result.success_rate.estimate
+
+    def on_candidate(candidate: Validated) -> None:
+        report(f"validation: {candidate.path.name} grasps {candidate.success:.1%} of {episodes} episodes")
+
+    validated = validate(run_dir, first_step, every, success, on_candidate)
+    chosen = choose(validated)
+    write_json(run_dir / RECORD, choice_record(run_dir, validated, chosen, episodes, seed, first_step, every))
+    report(f"validated policy: {chosen.path.name} (written to {run_dir / RECORD})")
+    return chosen
+
+
+def choice_record(
+    run_dir: Path, validated: Sequence[Validated], chosen: Validated, episodes: int, seed: int, first: int, every: int
+) -> dict[str, Any]:
+    """What ``RECORD`` holds: the rule, every candidate's validation success and the choice."""
+    return {
+        "rule": {
+            "first_step": first,
+            "every": every,
+            "validation_episodes": episodes,
+            "validation_seed": seed,
+            "choice": "the highest validation success; a tie goes to the later checkpoint",
+        },
+        "candidates": [
+            {"checkpoint": str(each.path.relative_to(run_dir)), "steps": each.steps, "validation_success": each.success}
+            for each in validated
+        ],
+        "chosen": str(chosen.path.relative_to(run_dir)),
+    }
+
+
+def recorded_choice(run_dir: Path) -> Validated | None:
+    """The run's recorded validated policy, if its record is current: made after the run's last checkpoint (a
+    run trained on past its record is chosen again); None without one."""
+    record_path = run_dir / RECORD
+    if not record_path.is_file():
+        return None
+    record = json.loads(record_path.read_text(encoding="utf-8"))
+    final = latest_checkpoint(run_dir)
+    if final is None or record["candidates"][-1]["checkpoint"] != str(final.relative_to(run_dir)):
+        return None
+    chosen = next(each for each in record["candidates"] if each["checkpoint"] == record["chosen"])
+    return Validated(run_dir / chosen["checkpoint"], chosen["steps"], chosen["validation_success"])

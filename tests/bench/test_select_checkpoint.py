@@ -30,7 +30,7 @@ def test_a_runs_validated_policy_is_chosen_and_scored(tmp_path: Path, capsys: py
     # validates alike and the tie goes to the latest.
     assert [c["steps"] for c in summary["candidates"]] == [1024, 2048, 3072]
     assert len({c["validation_success"] for c in summary["candidates"]}) == 1
-    assert summary["chosen"] == "step_0000003072.pt" and summary["rule"]["validation_seed"] == 200_000
+    assert summary["chosen"] == "checkpoints/step_0000003072.pt" and summary["rule"]["validation_seed"] == 200_000
     screening = read_run(out / "tiny-seed0" / "evaluation-hardest.json.xz")
     assert (screening.episodes, screening.first_seed) == (2, 20_000)
     assert screening.score == summary["screening"]["success_rate"]["estimate"]

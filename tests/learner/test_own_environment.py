@@ -1,7 +1,8 @@
 """A user's environment, which the project has never seen, trains, evaluates and renders from ``--env
 module:EnvId`` (docs/own-environment.md): ``examples.own_env``'s box-task ``PointReach-v0`` (an MLP and a
 Gaussian, under ALP-GMM) and its image-level ``GridLevels-v0`` (a CNN and a categorical head, under PLR), and an
-environment that breaks the contract is refused in one line with exit code 2; a bake-off runs on one too."""
+environment that breaks the contract is refused in one line with exit code 2; a bake-off runs on one too.
+PointReach's run also takes ``--policy-choice validated``, whose choice evaluate then plays."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import pytest
 from kuka_curriculum import main
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.policy import policy_spec_for
+from learner.evaluation.selection import RECORD, recorded_choice
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL_RUN = ["--total-steps", "2048", "--workers", "1", "--envs-per-worker", "2", "--rollout-length", "256"]
@@ -27,28 +29,42 @@ def from_the_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)
 
 
+VALIDATED = ["--policy-choice", "validated", "--checkpoint-every", "1"]
+"""A checkpoint every iteration of 512 steps, so the second half of 2,048 holds two candidates."""
+
+
 @pytest.mark.parametrize(
-    ("env_id", "teacher", "task", "image", "categorical"),
+    ("env_id", "teacher", "task", "image", "categorical", "flags"),
     [
-        ("examples.own_env:PointReach-v0", "alp-gmm", "hardest task", False, False),
-        ("examples.own_env:GridLevels-v0", "plr", "held-out levels", True, True),
+        ("examples.own_env:PointReach-v0", "alp-gmm", "hardest task", False, False, VALIDATED),
+        ("examples.own_env:GridLevels-v0", "plr", "held-out levels", True, True, []),
     ],
 )
 def test_a_users_environment_trains_evaluates_and_renders(
-    tmp_path, capsys, ray_cluster, env_id, teacher, task, image, categorical
+    tmp_path, capsys, ray_cluster, env_id, teacher, task, image, categorical, flags
 ) -> None:
     run_dir = tmp_path / "run"
     command = [sys.executable, "-m", "kuka_curriculum", "train", "--env", env_id, "--teacher", teacher]
-    command += ["--run-dir", str(run_dir), "--ray-address", ray_cluster, *SMALL_RUN]
+    command += ["--run-dir", str(run_dir), "--ray-address", ray_cluster, *SMALL_RUN, *flags]
     trained = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert trained.returncode == 0, trained.stderr[-3000:]
     checkpoint = load_checkpoint(latest_checkpoint(run_dir))
     assert checkpoint.config.env == env_id and checkpoint.counters.steps >= 2048
     spec = policy_spec_for(env_id, checkpoint.config.ppo)
     assert (spec.image_shape is not None, spec.categorical) == (image, categorical)
+    chosen = recorded_choice(run_dir)
+    if flags:  # the candidates: the first checkpoints at or after 1,024 and 1,194 steps (1,024 and 1,536), the last
+        record = json.loads((run_dir / RECORD).read_text())
+        assert [each["steps"] for each in record["candidates"]] == [1024, 1536, 2048]
+        assert chosen is not None and f"validated policy: {chosen.path.name}" in trained.stdout
+    else:
+        assert chosen is None and not (run_dir / RECORD).exists()
 
     assert main(["evaluate", str(run_dir), "--episodes", "4", "--processes", "1"]) == 0
-    assert f"{env_id}, {task}, 4 episodes" in capsys.readouterr().out
+    evaluated = capsys.readouterr().out
+    assert f"{env_id}, {task}, 4 episodes" in evaluated
+    if chosen is not None:
+        assert f"{chosen.path} (alp-gmm, {chosen.steps:_} steps, the run's validated policy)" in evaluated
 
     film = tmp_path / "policy.gif"
     assert main(["render", str(run_dir), "--out", str(film), "--episodes", "2"]) == 0
