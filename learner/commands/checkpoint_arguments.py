@@ -10,8 +10,8 @@ from pathlib import Path
 from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.commands.arguments import UsageError
-from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint
-from learner.evaluation.selection import recorded_choice
+from learner.core.checkpoint import Checkpoint, load_checkpoint
+from learner.evaluation.selection import run_policy
 
 CHECKPOINT_HELP = (
     "a checkpoint file, or a run directory (its policy: the validated one where train chose one, else its latest "
@@ -74,11 +74,10 @@ def read_checkpoint(path: Path) -> Checkpoint:
     (``train --policy-choice validated``), else its latest checkpoint."""
     path = Path(path)
     if path.is_dir():
-        latest = latest_checkpoint(path)
-        if latest is None:
+        policy = run_policy(path)
+        if policy is None:
             raise UsageError(f"{path} is a directory without checkpoints (expected a run directory or a .pt file)")
-        validated = recorded_choice(path)
-        path = latest if validated is None else validated.path
+        path = policy
     elif not path.is_file():
         raise UsageError(f"no checkpoint at {path}")
     try:

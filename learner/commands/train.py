@@ -29,7 +29,7 @@ from learner.commands.arguments import (
 )
 from learner.commands.config_file import read_config_file
 from learner.commands.training_flags import add_training_flags
-from learner.core.config import POLICY_CHOICES, TEACHERS, TrainConfig
+from learner.core.config import TEACHERS, TrainConfig
 from learner.job.session import (
     PUBLIC_URL_VARIABLE,
     check_ray_reachable,
@@ -79,13 +79,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=unit_fraction,
         help="a hard KUKA family's training placements: the share of far points drawn beyond the arm's x clamp "
         f"only; evaluations keep the task's draw (default {DEFAULTS.edge_placement_share})",
-    )
-    run.add_argument(
-        "--policy-choice",
-        choices=POLICY_CHOICES,
-        help="the run's policy, which evaluate and render play when given the run: its last checkpoint, or "
-        "'validated', the best of its second half's checkpoints on 200 validation episodes, chosen when it "
-        f"finishes (default {DEFAULTS.policy_choice})",
     )
     add_override_flags(run, "for this run")
     add_training_flags(run, defaults_given=False, level_families=True)

@@ -9,7 +9,7 @@ from common.client.task_space import MAX_LEVELS
 from common.families import family_for
 from common.kuka import ENV_IDS
 from learner.commands.arguments import positive_int
-from learner.core.config import LISTED_ENV_IDS, LOOPS, TrainConfig
+from learner.core.config import LISTED_ENV_IDS, LOOPS, POLICY_CHOICES, TrainConfig
 
 DEFAULTS = TrainConfig()
 
@@ -26,8 +26,9 @@ def env_id(text: str) -> str:
 
 def add_training_flags(group: argparse._ArgumentGroup, *, defaults_given: bool, level_families: bool = False) -> None:
     """``--env``, ``--workers``, ``--envs-per-worker``, ``--rollout-length``, ``--max-episode-steps``,
-    ``--checkpoint-every`` and ``--loop``. With ``defaults_given`` a flag left out takes its default (a
-    bake-off's runs all train alike); without, it is None, so ``train --resume`` keeps a run's saved value.
+    ``--checkpoint-every``, ``--loop`` and ``--policy-choice``. With ``defaults_given`` a flag left out takes its
+    default (a bake-off's runs all train alike); without, it is None, so ``train --resume`` keeps a run's saved
+    value.
     ``level_families``: ``--env`` also takes the MiniGrid level families and any ``module:EnvId``, and
     ``--levels`` sets a MiniGrid family's training set (``train``; a bake-off plays the KUKA families)."""
 
@@ -69,4 +70,12 @@ def add_training_flags(group: argparse._ArgumentGroup, *, defaults_given: bool, 
         default=DEFAULTS.loop if defaults_given else None,
         help="async: workers sample while the learner updates, one update behind; sync: strictly on-policy, "
         f"evaluations pause training (default {DEFAULTS.loop})",
+    )
+    group.add_argument(
+        "--policy-choice",
+        choices=POLICY_CHOICES,
+        default=DEFAULTS.policy_choice if defaults_given else None,
+        help="the run's policy, which evaluate, render and a bake-off's evaluation play: its last checkpoint, or "
+        "'validated', the best of its second half's checkpoints on 200 validation episodes, chosen when it "
+        f"finishes (default {DEFAULTS.policy_choice})",
     )

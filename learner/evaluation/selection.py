@@ -152,3 +152,9 @@ def recorded_choice(run_dir: Path) -> Validated | None:
         return None
     chosen = next(each for each in record["candidates"] if each["checkpoint"] == record["chosen"])
     return Validated(run_dir / chosen["checkpoint"], chosen["steps"], chosen["validation_success"])
+
+
+def run_policy(run_dir: Path) -> Path | None:
+    """The checkpoint that is the run's policy: its recorded validated one, else its latest; None without any."""
+    validated = recorded_choice(run_dir)
+    return latest_checkpoint(run_dir) if validated is None else validated.path

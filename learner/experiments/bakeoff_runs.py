@@ -32,6 +32,7 @@ from learner.core.checkpoint import latest_checkpoint, load_checkpoint
 from learner.core.config import TEACHERS, TrainConfig
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import EvaluationResult, evaluate_checkpoint
+from learner.evaluation.selection import run_policy
 from learner.experiments.run_archive import (
     EVALUATION_FILE,
     TRAIN_LOG,
@@ -59,9 +60,17 @@ TRAINING_FLAGS = {
     "curve_every": "--eval-every",
     "curve_episodes": "--eval-episodes",
     "loop": "--loop",
+    "policy_choice": "--policy-choice",
 }
 """Bake-off options handed to every ``train`` run unchanged (its flag there): what makes the comparison fair."""
-ADDED_SETTINGS = {"loop": "sync", "teacher_params": {}, "ppo": {}, "env": ENV_ID, "levels": DEFAULT_LEVELS}
+ADDED_SETTINGS = {
+    "loop": "sync",
+    "teacher_params": {},
+    "ppo": {},
+    "env": ENV_ID,
+    "levels": DEFAULT_LEVELS,
+    "policy_choice": "final",
+}
 """Settings newer than some stored bake-offs, with the value their runs were trained with."""
 
 
@@ -352,9 +361,9 @@ def train_runs(
 
 
 def evaluate_run(run: Run, episodes: int, seed: int, processes: int | None, env_id: str = ENV_ID) -> EvaluationResult:
-    """The final policy on its environment's evaluation task (the hardest, or held-out levels), cached with the
-    checkpoint it came from."""
-    checkpoint = latest_checkpoint(run.directory)
+    """The run's policy (its final checkpoint, or the validated one it chose) on its environment's evaluation task
+    (the hardest, or held-out levels), cached with the checkpoint it came from."""
+    checkpoint = run_policy(run.directory)
     assert checkpoint is not None, f"{run.name} finished training, so it has written a checkpoint"
     cache = run.directory / EVALUATION_FILE
     if exists(cache):  # raw, or compressed once the run was archived

@@ -9,7 +9,8 @@ evaluated), ``archive_run`` leaves the run in this form:
 - for git (``write_up_files``): ``evaluation.json.xz`` (a bake-off's runs), ``metrics.jsonl.xz`` with
   the fields the write-ups read alone (``WRITE_UP_METRICS``, ``thin_metrics``) and ``checkpoints/``
   with the final checkpoint alone, evaluation-only (``save_evaluation_only``: no optimiser state, a
-  third of the size; evaluate and render read it), the earlier ones deleted;
+  third of the size; evaluate and render read it), the earlier ones deleted; a run trained with
+  ``--policy-choice validated`` also keeps its chosen checkpoint, evaluation-only, and ``validated-policy.json``;
 - on disk only (``resume_files``, git-ignored): ``resume.pt``, the final checkpoint in full,
   ``metrics.full.jsonl.xz``, the metrics log in full, and ``teacher.sqlite.xz``, ``train.log.xz`` and
   ``teacher.log.xz``, which ``restore_run`` puts back before a larger budget resumes the run (the full
@@ -46,6 +47,8 @@ from learner.core.checkpoint import (
     save_evaluation_only,
 )
 from learner.core.metrics import METRICS_FILE
+from learner.evaluation.selection import RECORD as VALIDATION_RECORD
+from learner.evaluation.selection import run_policy
 
 SUFFIX = ".xz"
 TRAIN_LOG = "train.log"
@@ -87,9 +90,9 @@ def _raw_files() -> tuple[str, ...]:
 
 def write_up_files() -> tuple[str, ...]:
     """The paths, relative to the run directory, that an archived run keeps for the write-up and git:
-    the final evaluation and the metrics, compressed, and the checkpoints directory (holding the final one,
-    evaluation-only)."""
-    return EVALUATION_FILE + SUFFIX, METRICS_FILE + SUFFIX, CHECKPOINT_DIR
+    the final evaluation and the metrics, compressed, the checkpoints directory (holding the final one and a
+    validated run's chosen one, evaluation-only) and a validated run's record of its choice."""
+    return EVALUATION_FILE + SUFFIX, METRICS_FILE + SUFFIX, CHECKPOINT_DIR, VALIDATION_RECORD
 
 
 def resume_files() -> tuple[str, ...]:
@@ -260,8 +263,8 @@ def thin_metrics(log: Path) -> None:
 
 def archive_run(run_dir: Path) -> None:
     """Compress a finished, evaluated run's raw files and its evaluation, its metrics log split by
-    ``thin_metrics``, and keep only its latest (evaluated) checkpoint, evaluation-only, with its full form
-    moved to ``RESUME_CHECKPOINT``.
+    ``thin_metrics``, and keep only its latest checkpoint and the policy it chose (``--policy-choice
+    validated``), evaluation-only, with the latest's full form moved to ``RESUME_CHECKPOINT``.
 
     Call it only when no process has the run open. A run already archived is left untouched (one
     archived before the metrics were split too: ``thin_metrics`` splits it when called on its own).
@@ -274,10 +277,12 @@ def archive_run(run_dir: Path) -> None:
             thin_metrics(run_dir / name)
         elif (run_dir / name).exists():
             _pack(run_dir / name)
-    final = latest_checkpoint(run_dir)
+    final, chosen = latest_checkpoint(run_dir), run_policy(run_dir)
     for entry in (run_dir / CHECKPOINT_DIR).glob("*"):
-        if entry != final and entry.is_file():
+        if entry not in (final, chosen) and entry.is_file():
             entry.unlink()
+    if chosen is not None and chosen != final and not load_checkpoint(chosen).evaluation_only:
+        save_evaluation_only(chosen, chosen)
     if final is not None and not load_checkpoint(final).evaluation_only:
         # The full copy is whole before the final checkpoint is slimmed, so an interruption loses nothing.
         partial = run_dir / (RESUME_CHECKPOINT + ".partial")

@@ -108,7 +108,12 @@ def test_bakeoff_trains_resumes_skips_finished_runs_and_reports(tmp_path, ray_cl
         "train.log.xz",
     ]
     # For git what the report reads; the rest only on disk, for resuming.
-    assert sorted(write_up_files()) == ["checkpoints", "evaluation.json.xz", "metrics.jsonl.xz"]
+    assert sorted(write_up_files()) == [
+        "checkpoints",
+        "evaluation.json.xz",
+        "metrics.jsonl.xz",
+        "validated-policy.json",
+    ]
     assert sorted(resume_files()) == [
         "metrics.full.jsonl.xz",
         "resume.pt",
@@ -450,6 +455,10 @@ def test_each_teacher_trains_with_its_own_parameters_and_plain_names_reach_every
     assert '--teacher-param start="easiest" --teacher-param target="hardest"' in command
     assert "step=" not in command and "--ppo update_epochs=2" in command
     assert "--teacher-param" not in train_command(fixed, 10, settings, resume=False, ray_address=None)
+    # A setting newer than a stored bake-off is handed on as its runs were trained: the final policy.
+    assert "--policy-choice final" in command
+    validated = train_command(currot, 10, settings | {"policy_choice": "validated"}, resume=False, ray_address=None)
+    assert "--policy-choice validated" in " ".join(validated)
 
 
 def test_a_teacher_may_join_a_bakeoff_with_its_own_parameters_but_not_change_them(tmp_path):

@@ -6,13 +6,18 @@ from __future__ import annotations
 
 import json
 import lzma
+import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
+from learner.core.checkpoint import checkpoint_path, load_checkpoint
+from learner.core.json_file import write_json
 from learner.core.metrics import METRICS_FILE
+from learner.evaluation.selection import RECORD, Validated, choice_record, run_policy
 from learner.experiments.run_archive import (
+    RESUME_CHECKPOINT,
     archive_run,
     full_log,
     metrics_records,
@@ -21,6 +26,7 @@ from learner.experiments.run_archive import (
     thin_metrics,
     write_up_files,
 )
+from tests.learner.tiny_checkpoint import save_untrained_checkpoint
 
 ROOT = Path(__file__).resolve().parents[3]
 FULL_NAME = "metrics.full.jsonl.xz"
@@ -119,6 +125,20 @@ def test_archiving_keeps_only_the_read_fields_for_git_and_the_full_log_on_disk(t
     archived = snapshot(run)
     archive_run(run)
     assert snapshot(run) == archived, "archiving an archived run changes nothing"
+
+
+def test_a_validated_run_keeps_its_chosen_checkpoint_and_its_record_beside_the_final_one(tmp_path: Path) -> None:
+    run = finished_run(tmp_path / "run")
+    first = save_untrained_checkpoint(run)
+    chosen, final = (Path(shutil.copy(first, checkpoint_path(run, steps))) for steps in (1024, 1536))
+    candidates = [Validated(chosen, 1024, 0.9), Validated(final, 1536, 0.8)]
+    write_json(run / RECORD, choice_record(run, candidates, candidates[0], 200, 200_000, 1024, 512))
+    archive_run(run)
+    assert sorted(path.name for path in (run / "checkpoints").iterdir()) == [chosen.name, final.name]
+    assert load_checkpoint(chosen).evaluation_only and load_checkpoint(final).evaluation_only
+    assert not load_checkpoint(run / RESUME_CHECKPOINT).evaluation_only
+    assert RECORD in write_up_files() and (run / RECORD).exists()
+    assert run_policy(run) == chosen, "the archived run still reads as the policy it chose"
 
 
 def test_restoring_puts_the_full_log_back_raw_for_the_resumed_run_to_append_to(tmp_path: Path) -> None:
