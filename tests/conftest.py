@@ -11,7 +11,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 """One OpenMP thread in the test processes and every process they start, before any of them imports torch.
 The suite runs a test process per core, so torch's default of a thread per core puts two threads on each
 core, and OpenMP's threads spin while they wait for one another: SB3's example took 110 s of CPU with the
-default and 19 s with one thread on this machine, beside other work (docs/development.md)."""
+default and 19 s with one thread on this machine, beside other work (docs/development.md). torch reads it for its
+own threads too, so the PPO tests compute on one thread, as the trainer does."""
 
 pytest_plugins = ["tests.docker_stack"]
 """The Docker stack the Docker tests share: its fixtures, and the Docker tests run last."""

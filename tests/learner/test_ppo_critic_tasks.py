@@ -5,7 +5,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-import torch
 
 from common.policy.actor_critic import InferencePolicy, PolicySpec
 from common.policy.trajectory import TrajectoryBatch
@@ -16,15 +15,6 @@ STEPS, ENVS, OBS_DIM, TASK_DIM = 16, 16, 2, 2
 SCORE_ONLY_ROWS = 4
 """The first steps of every environment are score-only: the update must leave their tasks out with them."""
 CONFIG = PPOConfig(learning_rate=3e-3, anneal_lr=False, minibatch_size=64, update_epochs=10)
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """As the trainer runs: on a busy machine, more threads wait on each other far longer than they compute."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def task_batch(learner: PPOLearner, seed: int) -> tuple[TrajectoryBatch, np.ndarray]:

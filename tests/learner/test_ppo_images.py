@@ -20,14 +20,6 @@ from rollout_worker.sampler import Sampler, run_episodes
 SHAPE = (8, 8, 1)
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 class BrightSide(gym.Env[np.ndarray, Any]):
     """A one-step choice on an 8 x 8 grey image of dim noise with a bright 2 x 2 square somewhere in its left or
     right half: choosing that side pays 1. Discrete: action 0 is left, 1 right; a box: the action's sign."""

@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-import torch
 from reach_env import ReachTarget, RecordingTasks
 
 from common.policy.actor_critic import InferencePolicy, PolicySpec
@@ -16,17 +15,8 @@ def evaluate(learner: PPOLearner) -> tuple[float, float]:
     return float(np.mean([e.reward for e in episodes])), float(np.mean([e.success for e in episodes]))
 
 
-@pytest.fixture()
-def one_torch_thread():
-    """As the trainer runs: on a busy machine, more threads wait on each other far longer than they compute."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 @pytest.mark.parametrize("policy_lag", [0, 1], ids=["on-policy", "one-update-lag"])
-def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_torch_thread, policy_lag):
+def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(policy_lag):
     """With a lag of one, each batch is sampled with the weights from before the previous update,
     as the asynchronous training loop does."""
     config = PPOConfig(rollout_length=128, gamma=0.99, minibatch_size=128, update_epochs=10, learning_rate=1e-3)
@@ -53,7 +43,7 @@ def test_ppo_learns_to_reach_a_badly_scaled_target_within_a_small_budget(one_tor
     assert tasks.reported and len(tasks.reported) <= tasks.handed_out
 
 
-def test_a_batch_from_an_earlier_policy_is_refused(one_torch_thread):
+def test_a_batch_from_an_earlier_policy_is_refused():
     learner = PPOLearner(PolicySpec(obs_dim=2, action_dim=1, hidden_sizes=(8,)), PPOConfig(minibatch_size=32), seed=0)
     sampler = Sampler([ReachTarget()], RecordingTasks(), seed=0)
     batch = sampler.sample(InferencePolicy(learner.snapshot()), 32)

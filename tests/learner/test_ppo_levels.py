@@ -8,8 +8,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import pytest
-import torch
 from reach_env import RecordingTasks
 
 from common.levels.env import make_level_env
@@ -22,14 +20,6 @@ CONFIG = PPOConfig(
     rollout_length=64, gamma=0.99, gae_lambda=0.95, minibatch_size=64, update_epochs=2, entropy_coef=0.01
 )
 LEVEL_SPEC = PolicySpec(obs_dim=147, action_dim=7, hidden_sizes=(32, 32), categorical=True)
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def level_batch():

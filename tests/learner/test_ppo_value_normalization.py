@@ -16,15 +16,6 @@ STEPS, ENVS = 16, 16
 CONFIG = PPOConfig(learning_rate=3e-3, anneal_lr=False, minibatch_size=64, update_epochs=10, normalize_values=True)
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """As the trainer runs: on a busy machine, more threads wait on each other far longer than they compute."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 def return_batch(learner: PPOLearner, seed: int, offset: float, scale: float) -> TrajectoryBatch:
     """One-step episodes whose return is ``offset + scale x`` the observation's first entry, with the values the
     workers would have computed from the learner's current snapshot."""
