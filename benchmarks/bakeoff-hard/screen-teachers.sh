@@ -35,8 +35,10 @@ mkdir -p "$OUT"
 # shellcheck source=benchmarks/bakeoff-hard/screen-steps.sh
 source "$HERE/screen-steps.sh"
 
-finished() {  # NAME: whether the run's results are copied
-    [ -f "$HERE/screening/$PREFIX-$1/evaluation-hardest.json" ]
+finished() {  # NAME: whether the run's results are copied (plain, or xz-compressed as git keeps them, so a fresh
+    # checkout of committed results skips the run rather than training it again)
+    local kept="$HERE/screening/$PREFIX-$1/evaluation-hardest.json"
+    [ -f "$kept" ] || [ -f "$kept.xz" ]
 }
 
 next_configuration() {  # the first line of the list whose results are not yet copied
