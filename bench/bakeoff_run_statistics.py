@@ -17,14 +17,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from learner.commands.arguments import int_between  # noqa: E402
 from learner.core.config import TEACHERS  # noqa: E402
 from learner.experiments.bakeoff_report import (  # noqa: E402
     RUN_STATISTICS_MARKDOWN,
     recompute_run_statistics,
 )
 from learner.experiments.bakeoff_statistics import DEFAULT_BASELINE  # noqa: E402
-from learner.experiments.run_statistics import MAX_REPS, MIN_REPS, REPS, SEED  # noqa: E402
+from learner.experiments.run_statistics import REPS, REPS_HELP, SEED, bootstrap_reps  # noqa: E402
 
 
 def main() -> None:
@@ -32,12 +31,7 @@ def main() -> None:
     parser.add_argument("results", type=Path, help="a bake-off's results.json")
     parser.add_argument("--out", type=Path, help="where to write (default: the results file's directory)")
     parser.add_argument("--baseline", choices=TEACHERS, default=DEFAULT_BASELINE, help=f"default {DEFAULT_BASELINE}")
-    parser.add_argument(
-        "--reps",
-        type=int_between(MIN_REPS, MAX_REPS),
-        default=REPS,
-        help=f"bootstrap resamples per interval (default {REPS:_}; {MIN_REPS} to {MAX_REPS:_})",
-    )
+    parser.add_argument("--reps", type=bootstrap_reps, default=REPS, help=REPS_HELP)
     parser.add_argument("--seed", type=int, default=SEED, help=f"the bootstrap's seed (default {SEED})")
     args = parser.parse_args()
     recompute_run_statistics(args.results, args.out, args.baseline, args.reps, args.seed)

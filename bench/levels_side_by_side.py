@@ -826,8 +826,7 @@ def measure_throughput(args: argparse.Namespace) -> None:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    from learner.commands.arguments import int_between
-    from learner.experiments.run_statistics import MAX_REPS, MIN_REPS, REPS
+    from learner.experiments.run_statistics import REPS, REPS_HELP, bootstrap_reps
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, help="where the runs and results go")
@@ -841,12 +840,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--test-levels", type=int, default=200, help="held-out levels of the final test")
     parser.add_argument("--test-repeats", type=int, default=2, help="episodes per held-out level in the final test")
     parser.add_argument("--take-off", type=float, default=TAKE_OFF, help="held-out success that counts as take-off")
-    parser.add_argument(
-        "--reps",
-        type=int_between(MIN_REPS, MAX_REPS),
-        default=REPS,
-        help=f"bootstrap resamples per interval ({MIN_REPS} to {MAX_REPS:_})",
-    )
+    parser.add_argument("--reps", type=bootstrap_reps, default=REPS, help=REPS_HELP)
     parser.add_argument("--ray-address", help="a running Ray cluster (default: start a local one)")
     parser.add_argument("--progress", action="store_true", help="show each run's steps as it trains")
     parser.add_argument("--summarise", action="store_true", help="only rewrite results.json and results.md")

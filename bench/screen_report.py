@@ -35,13 +35,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.provenance import commit, machine  # noqa: E402
 from bench.screen_power import fisher_one_sided  # noqa: E402
-from learner.commands.arguments import int_between  # noqa: E402
 from learner.experiments.run_statistics import (  # noqa: E402
-    MAX_REPS,
-    MIN_REPS,
     REPS,
+    REPS_HELP,
     SEED,
     THRESHOLD,
+    bootstrap_reps,
     plot_performance_profile,
     run_statistics,
     statistics_table,
@@ -174,12 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--threshold", type=unit_threshold, default=THRESHOLD, help=f"a good run's score (default {THRESHOLD})"
     )
-    parser.add_argument(
-        "--reps",
-        type=int_between(MIN_REPS, MAX_REPS),
-        default=REPS,
-        help=f"bootstrap resamples per interval (default {REPS:_}; {MIN_REPS} to {MAX_REPS:_})",
-    )
+    parser.add_argument("--reps", type=bootstrap_reps, default=REPS, help=REPS_HELP)
     args = parser.parse_args(argv)
     patterns: dict[str, list[str]] = {}
     for name, pattern in args.arm:

@@ -15,7 +15,7 @@ import functools
 from pathlib import Path
 
 from common.families import family_for
-from learner.commands.arguments import add_override_flags, int_at_least, int_between, positive_int, run_command
+from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
 from learner.commands.config_file import BakeoffConfigAction
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
@@ -45,7 +45,7 @@ from learner.experiments.bakeoff_runs import (
 )
 from learner.experiments.bakeoff_statistics import DEFAULT_BASELINE, TeacherResult
 from learner.experiments.run_archive import archive_run
-from learner.experiments.run_statistics import MAX_REPS, MIN_REPS, REPS
+from learner.experiments.run_statistics import REPS, REPS_HELP, bootstrap_reps
 from learner.job.teacher_probe import teacher_probe
 
 
@@ -86,10 +86,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--bootstrap-reps",
-        type=int_between(MIN_REPS, MAX_REPS),
+        type=bootstrap_reps,
         default=REPS,
-        help=f"bootstrap resamples per interval of the run statistics (default {REPS:_}; {MIN_REPS} to "
-        f"{MAX_REPS:_}): fewer for a quick look. A report setting only, as --baseline",
+        help=f"{REPS_HELP} for the run statistics: fewer for a quick look. A report setting only, as --baseline",
     )
     evaluation = parser.add_argument_group("final evaluation (hardest task)")
     evaluation.add_argument(

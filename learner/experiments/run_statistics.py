@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from learner.commands.arguments import int_between
 from learner.evaluation.stats import CONFIDENCE, Interval, wilson_interval
 
 THRESHOLD = 0.8
@@ -44,6 +45,9 @@ with fewer resamples a bound moves between neighbouring ones from one seed to th
 intervals, more again, would take minutes per bake-off (``docs/results/bakeoff-hard.md`` measures both)."""
 MIN_REPS, MAX_REPS = 100, 100_000
 """The resamples a command may ask for: fewer make bounds that jump, more cost minutes per report."""
+REPS_HELP = f"bootstrap resamples per interval (default {REPS:_}; {MIN_REPS} to {MAX_REPS:_})"
+bootstrap_reps = int_between(MIN_REPS, MAX_REPS)
+"""The command-line type of a number of resamples: a whole number from ``MIN_REPS`` to ``MAX_REPS``."""
 SEED = 0
 PROFILE_POINTS = 101
 """Scores at which the performance profile is evaluated, evenly over [0, 1]."""
