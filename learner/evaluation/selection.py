@@ -141,8 +141,9 @@ def choice_record(
 
 
 def recorded_choice(run_dir: Path) -> Validated | None:
-    """The run's recorded validated policy, if its record is current: made after the run's last checkpoint (a
-    run trained on past its record is chosen again); None without one."""
+    """The run's recorded validated policy while the record is current, its last candidate the run's last
+    checkpoint (a run trained on past its record is chosen again); None without one. The record is written
+    whole or not at all (``write_json``)."""
     record_path = run_dir / RECORD
     if not record_path.is_file():
         return None
