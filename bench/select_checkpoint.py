@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.provenance import commit, machine  # noqa: E402
 from learner.commands.arguments import int_between, positive_int  # noqa: E402
 from learner.commands.checkpoint_arguments import checkpoint_task  # noqa: E402
-from learner.core.checkpoint import Checkpoint, latest_checkpoint, load_checkpoint  # noqa: E402
+from learner.core.checkpoint import Checkpoint, load_checkpoint  # noqa: E402
 from learner.evaluation.checkpoint_evaluation import (  # noqa: E402
     EvaluationResult,
     checkpoint_record,
@@ -41,7 +41,7 @@ from learner.evaluation.selection import (  # noqa: E402
     Validated,
     choice_record,
     choose,
-    schedule,
+    run_schedule,
     validate,
 )
 
@@ -59,10 +59,7 @@ def play(checkpoint: Checkpoint, episodes: int, seed: int, processes: int | None
 
 def validate_run(run_dir: Path, out: Path, args: argparse.Namespace) -> dict[str, Any]:
     """Choose the run's policy on the validation episodes, score it on the screening ones, and write both."""
-    final = latest_checkpoint(run_dir)
-    if final is None:
-        raise SystemExit(f"{run_dir}: no checkpoints")
-    first_step, every = schedule(load_checkpoint(final).config.total_steps)
+    first_step, every = run_schedule(run_dir)
     first_step, every = args.first_step or first_step, args.every or every
     loaded: dict[Path, Checkpoint] = {}
 

@@ -34,6 +34,14 @@ def schedule(total_steps: int) -> tuple[int, int]:
     return total_steps // 2, max(1, total_steps // 12)
 
 
+def run_schedule(run_dir: Path) -> tuple[int, int]:
+    """``schedule`` of the budget the run trained to, as its last checkpoint records it."""
+    final = latest_checkpoint(run_dir)
+    if final is None:
+        raise ValueError(f"{run_dir}: no checkpoints")
+    return schedule(load_checkpoint(final).config.total_steps)
+
+
 @dataclass(frozen=True)
 class Validated:
     """A candidate checkpoint and its success on the validation episodes."""
@@ -75,7 +83,7 @@ def validate(
     first_step: int,
     every: int,
     success: Callable[[Path], float],
-    on_candidate: Callable[[Validated], None] = lambda candidate: None,
+    on_candidate: Callable[[Validated], None],
 ) -> list[Validated]:
     """Every candidate checkpoint with its validation success (``success`` plays a checkpoint's file)."""
     validated = []
@@ -99,10 +107,7 @@ def choose_validated_policy(
     current = recorded_choice(run_dir)
     if current is not None:
         return current
-    final = latest_checkpoint(run_dir)
-    if final is None:
-        raise ValueError(f"{run_dir}: no checkpoints")
-    first_step, every = schedule(load_checkpoint(final).config.total_steps)
+    first_step, every = run_schedule(run_dir)
 
     def success(path: Path) -> float:
         checkpoint = load_checkpoint(path)
