@@ -12,6 +12,10 @@ statements staying on the loop: at 1,000 simulated workers it cost the main proc
 CPU per result and raised p99 by half to nearly double, the results page's "A fleet on one service".)
 Writes complete, and their ``on_commit`` callbacks run, in the order they were submitted: the
 teachers see results in exactly the order they are stored, which is the order a replay feeds them back.
+The one exception is a fit's record that a full disk refused: nobody waits for it and nothing else
+can bring it back, so it is tried again with every later commit, and at least every ``RETRY_S``
+seconds, until it lands (a fit's row says where it was installed, so its place in the table does
+not matter).
 
 What a restart reads (schema version 3): per curriculum, its newest snapshot (one row: the
 teacher's exported state, the service's counters and awaited task indices, and the sequence
@@ -38,6 +42,9 @@ import numpy as np
 from common.client.task_space import Task
 
 log = logging.getLogger(__name__)
+
+RETRY_S = 1.0
+"""How long a refused record that must land waits, at most, before it is tried again."""
 
 SCHEMA_VERSION = 3
 _SCHEMA_V1 = """
@@ -315,6 +322,9 @@ class _Write:
     on_commit: Callback
     on_abort: Callback
     error: BaseException | None = field(default=None)
+    keep_trying: bool = False
+    """Tried again until it lands when the disk or the file refused it (SQLite's operational errors:
+    full, I/O, read-only); never when its statements were wrong, which they would be again."""
 
 
 class Store:
@@ -333,6 +343,9 @@ class Store:
         self._migrate()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pending: list[_Write] = []
+        self._refused: list[_Write] = []
+        """Writes that must land, refused by a failed commit: the next commit tries them first."""
+        self._retry: asyncio.TimerHandle | None = None
         self.writes_failing: str | None = None
         """Why the last commit failed (a full disk, a read-only file); None once one succeeds."""
 
@@ -531,8 +544,9 @@ class Store:
         return self._write([(_INSERT_RESULT, rows)], on_commit=on_commit, on_abort=on_abort)
 
     def add_fit_later(self, curriculum_id: int, fit: StoredFit) -> None:
-        """Record a fit that came back (installed or failed); nobody waits for it."""
-        self._write_later([(_INSERT_FIT, [_fit_row(curriculum_id, fit)])])
+        """Record a fit that came back (installed or failed); nobody waits for it, and a full disk
+        only delays it: without its row, a replay would find the fit due and never recorded."""
+        self._queue(_Write([(_INSERT_FIT, [_fit_row(curriculum_id, fit)])], None, None, None, keep_trying=True))
 
     def put_snapshot_later(
         self, curriculum_id: int, snapshot: TeacherSnapshot, on_commit: Callback = None, on_abort: Callback = None
@@ -574,8 +588,13 @@ class Store:
         self._queue(_Write(statements, None, on_commit, on_abort))
 
     def close(self) -> None:
-        """Commit what is queued, then close the database."""
-        self._flush()
+        """Commit what is queued, then close the database; a record the disk still refuses is lost,
+        and said so (a restart runs a fit without its record again)."""
+        if self._retry is not None:
+            self._retry.cancel()
+        self._flush(retry_later=False)
+        if self._refused:
+            log.error("closing with %d records the disk refused; they are lost", len(self._refused))
         self._db.close()
 
     def _queue(self, write: _Write) -> None:
@@ -584,13 +603,21 @@ class Store:
             self._loop.call_soon(self._flush)
         self._pending.append(write)
 
-    def _flush(self) -> None:
-        group, self._pending = self._pending, []
+    def _flush(self, retry_later: bool = True) -> None:
+        group, self._pending, self._refused = self._refused + self._pending, [], []
         if group:
             try:
                 self._commit(group)
             finally:
                 self._complete(group)
+        if self._refused and self._retry is None and retry_later:
+            assert self._loop is not None
+            self._retry = self._loop.call_later(RETRY_S, self._flush_refused)
+
+    def _flush_refused(self) -> None:
+        self._retry = None
+        if not self._pending:  # otherwise the flush already due tries them
+            self._flush()
 
     def _commit(self, group: list[_Write]) -> None:
         """Commit the group in one transaction; a write whose statements fail is rolled back alone.
@@ -613,6 +640,7 @@ class Store:
                         raise  # SQLite rolled the whole transaction back (disk full, I/O error)
                     self._db.execute("ROLLBACK TO one_write")
                     write.error = error
+                    write.keep_trying &= isinstance(error, sqlite3.OperationalError)
                 self._db.execute("RELEASE one_write")
             self._db.execute("COMMIT")
             self.writes_failing = None
@@ -632,9 +660,12 @@ class Store:
         except sqlite3.Error:
             log.exception("rollback failed; the next write retries it")
 
-    @staticmethod
-    def _complete(group: list[_Write]) -> None:
+    def _complete(self, group: list[_Write]) -> None:
         for write in group:
+            if write.error is not None and write.keep_trying:
+                write.error = None
+                self._refused.append(write)
+                continue
             outcome: Exception | None
             if write.error is None:
                 callback, outcome = write.on_commit, None

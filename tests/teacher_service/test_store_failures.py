@@ -23,7 +23,7 @@ from in_process_service import ANSWER_WITHIN_S, InProcessService
 from common.client.schemas import ResultAck, ResultBatch
 from common.client.teacher_client import Backoff, TeacherClient
 from common.kuka.task_space import KUKA_TASK_SPACE
-from teacher_service.store import StoreError
+from teacher_service.store import RETRY_S, StoreError
 
 TOKEN = "store-failure-test-token"
 
@@ -221,29 +221,65 @@ def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_r
     assert _stored_results(service.store.path, "client") == {a.task_id for a in assignments}
 
 
-def test_a_fit_whose_record_meets_a_full_disk_is_run_again_by_the_restart(
+FITTING = {"teacher": "alp-gmm", "seed": 0, "params": {"fit_rate": 200}}
+
+
+def _fit_during_a_full_disk(service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]) -> Any:
+    """Make a fit due, fill the disk while it runs, and wait for it to be installed: its record is
+    refused. Returns the curriculum's live state."""
+    assert http.put("/curricula/fitting", json={**FITTING, "space": kuka_space}).status_code == 201
+    tasks = _draw(http, "fitting", 200).json()["tasks"]
+    assert http.post("/curricula/fitting/results", json=_results(tasks)).json()["accepted"] == 200  # fit 0 due
+    service.fill_disk()
+    while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
+        time.sleep(0.05)
+    assert _stored_fits(service.store.path) == 0, "the disk had room for the fit's record"
+    live = http.get("/curricula/fitting/state").json()
+    assert [fit["index"] for fit in live["fits"]] == [0] and live["fits"][0]["error"] is None
+    return live
+
+
+def _stored_fits(db: Path) -> int:
+    with sqlite3.connect(db) as connection:
+        return int(connection.execute("SELECT COUNT(*) FROM fits").fetchone()[0])
+
+
+def test_a_fit_record_the_full_disk_refused_lands_once_there_is_room_with_no_other_write(
     tmp_path: Path, kuka_space: list[dict[str, Any]]
 ) -> None:
-    """The disk fills while a fit runs: its model is installed but its record cannot be stored. Once
-    there is room, a restart runs that fit again from the stored results, and is the same teacher."""
+    """Nobody waits for a fit's record, so nothing else would send it again: the store does, until
+    it lands. Without it a replay from the first result finds the fit due and never recorded, and
+    every later fit stuck behind it (the chaos run's "state equals a replay" caught this)."""
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    with (
+        InProcessService(tmp_path / "teacher.db", TOKEN) as service,
+        httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http,
+    ):
+        _fit_during_a_full_disk(service, http, kuka_space)
+        time.sleep(2 * RETRY_S)
+        assert _stored_fits(service.store.path) == 0, "stored while the disk was full"
+        service.free_disk()
+        deadline = time.monotonic() + 10 * RETRY_S
+        while _stored_fits(service.store.path) == 0:
+            assert time.monotonic() < deadline, "the refused fit record was never tried again"
+            time.sleep(0.05)
+        assert http.get("/curricula/fitting").json()["counters"]["fits_completed"] == 1
+        assert _stored_fits(service.store.path) == 1, "stored more than once"
+
+
+def test_a_fit_whose_record_the_disk_still_refused_at_the_stop_is_run_again_by_the_restart(
+    tmp_path: Path, kuka_space: list[dict[str, Any]]
+) -> None:
+    """The service stops while the disk is still full: the fit's record is lost. The restart runs
+    that fit again from the stored results, and is the same teacher."""
     db = tmp_path / "teacher.db"
-    body = {"teacher": "alp-gmm", "space": kuka_space, "seed": 0, "params": {"fit_rate": 200}}
     headers = {"Authorization": f"Bearer {TOKEN}"}
     with (
         InProcessService(db, TOKEN) as service,
         httpx.Client(base_url=f"{service.url}/api/v1", headers=headers) as http,
     ):
-        assert http.put("/curricula/fitting", json=body).status_code == 201
-        tasks = _draw(http, "fitting", 200).json()["tasks"]
-        assert http.post("/curricula/fitting/results", json=_results(tasks)).json()["accepted"] == 200  # fit 0 due
-        service.fill_disk()
-        while http.get("/curricula/fitting").json()["counters"]["fits_pending"]:
-            time.sleep(0.05)
-        with sqlite3.connect(db) as connection:
-            assert connection.execute("SELECT COUNT(*) FROM fits").fetchone() == (0,), "the fit's record was lost"
-        live = http.get("/curricula/fitting/state").json()
-        assert [fit["index"] for fit in live["fits"]] == [0] and live["fits"][0]["error"] is None
-        service.free_disk()
+        live = _fit_during_a_full_disk(service, http, kuka_space)
+    assert _stored_fits(db) == 0, "the full disk took the record at the stop"
 
     with (
         InProcessService(db, TOKEN) as service,
