@@ -11,7 +11,7 @@ from common.client.task_space import Task, TaskSpace
 from common.kuka.task_space import KUKA_TASK_SPACE
 from learner.commands.arguments import UsageError
 from learner.core.checkpoint import Checkpoint, load_checkpoint
-from learner.evaluation.selection import run_policy
+from learner.evaluation.selection import UnreadableRecord, run_policy
 
 CHECKPOINT_HELP = (
     "a checkpoint file, or a run directory (its policy: the validated one where train chose one, else its latest "
@@ -74,7 +74,10 @@ def read_checkpoint(path: Path) -> Checkpoint:
     (``train --policy-choice validated``), else its latest checkpoint."""
     path = Path(path)
     if path.is_dir():
-        policy = run_policy(path)
+        try:
+            policy = run_policy(path)
+        except UnreadableRecord as error:
+            raise UsageError(str(error)) from None
         if policy is None:
             raise UsageError(f"{path} is a directory without checkpoints (expected a run directory or a .pt file)")
         path = policy

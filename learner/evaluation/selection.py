@@ -28,6 +28,10 @@ RECORD = "validated-policy.json"
 """The choice, in the run directory: every candidate's validation success and the chosen checkpoint."""
 
 
+class UnreadableRecord(ValueError):
+    """A run's ``RECORD`` that cannot say which checkpoint it chose (edited by hand, or its checkpoint gone)."""
+
+
 def schedule(total_steps: int) -> tuple[int, int]:
     """The first candidate's step and the steps between candidates for a run's budget: its second half, every
     twelfth of it (3M and 0.5M on the hard family's 6M, where CURROT is still moving the tasks before 3M)."""
@@ -148,16 +152,30 @@ def choice_record(
 def recorded_choice(run_dir: Path) -> Validated | None:
     """The run's recorded validated policy while the record is current, its last candidate the run's last
     checkpoint (a run trained on past its record is chosen again); None without one. The record is written
-    whole or not at all (``write_json``)."""
+    whole or not at all (``write_json``); one that cannot say what it chose raises ``UnreadableRecord``, since
+    playing another checkpoint in its place would score a policy the user did not ask for."""
     record_path = run_dir / RECORD
     if not record_path.is_file():
         return None
-    record = json.loads(record_path.read_text(encoding="utf-8"))
-    final = latest_checkpoint(run_dir)
-    if final is None or record["candidates"][-1]["checkpoint"] != str(final.relative_to(run_dir)):
-        return None
-    chosen = next(each for each in record["candidates"] if each["checkpoint"] == record["chosen"])
-    return Validated(run_dir / chosen["checkpoint"], chosen["steps"], chosen["validation_success"])
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+        last_candidate = record["candidates"][-1]["checkpoint"]
+        final = latest_checkpoint(run_dir)
+        if final is None or last_candidate != str(final.relative_to(run_dir)):
+            return None
+        chosen = next(each for each in record["candidates"] if each["checkpoint"] == record["chosen"])
+        validated = Validated(run_dir / chosen["checkpoint"], int(chosen["steps"]), float(chosen["validation_success"]))
+    except (ValueError, KeyError, IndexError, TypeError, StopIteration) as error:
+        raise UnreadableRecord(
+            f"{record_path} does not say which checkpoint it chose ({error!r}); "
+            "delete it and the run's policy is chosen again"
+        ) from None
+    if not validated.path.is_file():
+        raise UnreadableRecord(
+            f"{record_path} chose {validated.path.name}, which is not in the run any more; "
+            "delete it and the run's policy is chosen again"
+        )
+    return validated
 
 
 def run_policy(run_dir: Path) -> Path | None:
