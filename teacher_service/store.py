@@ -546,7 +546,7 @@ class Store:
     def add_fit_later(self, curriculum_id: int, fit: StoredFit) -> None:
         """Record a fit that came back (installed or failed); nobody waits for it, and a full disk
         only delays it: without its row, a replay would find the fit due and never recorded."""
-        self._queue(_Write([(_INSERT_FIT, [_fit_row(curriculum_id, fit)])], None, None, None, keep_trying=True))
+        self._write_later([(_INSERT_FIT, [_fit_row(curriculum_id, fit)])], keep_trying=True)
 
     def put_snapshot_later(
         self, curriculum_id: int, snapshot: TeacherSnapshot, on_commit: Callback = None, on_abort: Callback = None
@@ -582,10 +582,17 @@ class Store:
         self._queue(_Write(statements, future, on_commit, on_abort))
         return future
 
-    def _write_later(self, statements: _Statements, on_commit: Callback = None, on_abort: Callback = None) -> None:
-        """Queue a write nobody waits for (telemetry, snapshots); a failure is logged. The
+    def _write_later(
+        self,
+        statements: _Statements,
+        on_commit: Callback = None,
+        on_abort: Callback = None,
+        keep_trying: bool = False,
+    ) -> None:
+        """Queue a write nobody waits for (telemetry, snapshots); a failure is logged, or with
+        ``keep_trying`` the write is tried again until it lands (``_Write.keep_trying``). The
         callbacks run as for ``_write``."""
-        self._queue(_Write(statements, None, on_commit, on_abort))
+        self._queue(_Write(statements, None, on_commit, on_abort, keep_trying=keep_trying))
 
     def close(self) -> None:
         """Commit what is queued, then close the database; a record the disk still refuses is lost,

@@ -157,10 +157,10 @@ def recorded_choice(run_dir: Path) -> Validated | None:
     record_path = run_dir / RECORD
     if not record_path.is_file():
         return None
+    final = latest_checkpoint(run_dir)
     try:
         record = json.loads(record_path.read_text(encoding="utf-8"))
         last_candidate = record["candidates"][-1]["checkpoint"]
-        final = latest_checkpoint(run_dir)
         if final is None or last_candidate != str(final.relative_to(run_dir)):
             return None
         chosen = next(each for each in record["candidates"] if each["checkpoint"] == record["chosen"])

@@ -224,7 +224,9 @@ def test_the_client_keeps_results_through_503s_and_delivers_them_once_there_is_r
 FITTING = {"teacher": "alp-gmm", "seed": 0, "params": {"fit_rate": 200}}
 
 
-def _fit_during_a_full_disk(service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]) -> Any:
+def _fit_during_a_full_disk(
+    service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]]
+) -> dict[str, Any]:
     """Make a fit due, fill the disk while it runs, and wait for it to be installed: its record is
     refused. Returns the curriculum's live state."""
     assert http.put("/curricula/fitting", json={**FITTING, "space": kuka_space}).status_code == 201
