@@ -4,8 +4,11 @@ given on the command line still override them.
 
 The file is a JSON object whose keys are among ``SETTINGS`` (each the ``TrainConfig`` field of that
 name), ``ppo`` (PPOConfig fields) and ``teacher_params`` (parameters of the file's ``teacher``);
-``tune`` records where the settings came from and is not read. Other keys are refused by name, so
-a typo never passes silently.
+``tune`` and ``about`` record where the settings came from and are not read. Other keys are refused by
+name, so a typo never passes silently.
+
+A recipe is such a file shipped with the package (``RECIPE_DIR``), named rather than found by path: the
+settings the measurements chose for a task, so a user trains them with one flag (``--config hard-grasp-v1``).
 """
 
 from __future__ import annotations
@@ -19,11 +22,35 @@ from typing import Any
 
 from learner.core.config import TrainConfig
 
-SETTINGS = ("teacher", "env", "workers", "envs_per_worker", "max_episode_steps", "loop")
+SETTINGS = (
+    "teacher",
+    "env",
+    "total_steps",
+    "workers",
+    "envs_per_worker",
+    "max_episode_steps",
+    "loop",
+    "policy_choice",
+)
 """``TrainConfig`` fields a settings file may set."""
 NOTES_KEY = "tune"
-KNOWN_KEYS = (*SETTINGS, "ppo", "teacher_params", NOTES_KEY)
+ABOUT_KEY = "about"
+"""A recipe's note of what it is and which runs chose it."""
+KNOWN_KEYS = (*SETTINGS, "ppo", "teacher_params", NOTES_KEY, ABOUT_KEY)
 """Every key a settings file may hold, in the order an error lists them."""
+RECIPE_DIR = Path(__file__).parent / "recipes"
+RECIPES = tuple(sorted(path.stem for path in RECIPE_DIR.glob("*.json")))
+"""The shipped recipes' names, each the stem of its file in ``RECIPE_DIR``."""
+CONFIG_HELP = (
+    "a settings file, such as the best.json of `kuka-curriculum tune`, or a shipped recipe by name: "
+    + ", ".join(RECIPES)
+    + " (docs/commands.md#recipes; a file of that name in this folder is ./NAME)"
+)
+
+
+def config_path(text: str) -> Path:
+    """``--config``'s argument: a recipe's name gives its shipped file, anything else is a path."""
+    return RECIPE_DIR / f"{text}.json" if text in RECIPES else Path(text)
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from learner.commands.arguments import (
     teacher_kind,
     unit_fraction,
 )
-from learner.commands.config_file import read_config_file
+from learner.commands.config_file import CONFIG_HELP, config_path, read_config_file
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
 from learner.job.session import (
@@ -50,8 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run = parser.add_argument_group("run")
     run.add_argument(
         "--config",
-        type=Path,
-        help="a settings file, such as the best.json of `kuka-curriculum tune`; flags given override it",
+        type=config_path,
+        metavar="FILE_OR_RECIPE",
+        help=f"{CONFIG_HELP}; flags given override it",
     )
     run.add_argument(
         "--teacher",

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from common.families import family_for
 from learner.commands.arguments import add_override_flags, int_at_least, positive_int, run_command
-from learner.commands.config_file import BakeoffConfigAction
+from learner.commands.config_file import CONFIG_HELP, BakeoffConfigAction, config_path
 from learner.commands.training_flags import add_training_flags
 from learner.core.config import TEACHERS, TrainConfig
 from learner.evaluation.checkpoint_evaluation import EvaluationResult, scripted_evaluation
@@ -112,10 +112,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     training.add_argument(
         "--config",
-        type=Path,
+        type=config_path,
+        metavar="FILE_OR_RECIPE",
         action=BakeoffConfigAction,
-        help="a settings file, such as the best.json of `kuka-curriculum tune`, for every run: its PPO values, "
-        "its layout and its teacher's parameters (for that teacher); flags given override it",
+        help=f"{CONFIG_HELP}, for every run: its budget, its PPO values, its layout and its teacher's parameters (for "
+        "that teacher); flags given override it",
     )
     add_override_flags(
         training,
