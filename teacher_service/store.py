@@ -650,10 +650,14 @@ class Store:
                     write.keep_trying &= isinstance(error, sqlite3.OperationalError)
                 self._db.execute("RELEASE one_write")
             self._db.execute("COMMIT")
+            if self.writes_failing is not None:
+                log.warning("writes land again (they had failed: %s)", self.writes_failing)
             self.writes_failing = None
         except BaseException as error:
-            log.exception("commit of %d writes failed", len(group))
-            self.writes_failing = _reason(error)
+            reason = _reason(error)
+            if reason != self.writes_failing:  # once when it starts: a full disk retries a refused record every second
+                log.exception("commit of %d writes failed", len(group))
+            self.writes_failing = reason
             self._roll_back()
             for write in group:
                 write.error = write.error or error

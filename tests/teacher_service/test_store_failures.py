@@ -179,6 +179,39 @@ def test_an_exception_that_is_not_sqlites_fails_the_writes_and_the_next_ones_wor
     assert _stored_results(service.store.path, "odd") == {task["task_id"] for task in tasks}
 
 
+class RefusingCommits(FailingConnection):
+    """The store's connection, refusing every COMMIT while ``refusing``, as a disk that stays full refuses
+    the journal's writes."""
+
+    def __init__(self, db: sqlite3.Connection) -> None:
+        super().__init__(db, "COMMIT", sqlite3.OperationalError("database or disk is full"))
+        self.refusing = True
+
+    def _check(self, sql: str) -> None:
+        if self.refusing and sql.startswith(self.prefix):
+            raise sqlite3.OperationalError("database or disk is full")
+
+
+def test_a_failure_that_lasts_is_logged_when_it_starts_and_when_it_ends_not_at_every_write(
+    service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
+) -> None:
+    """A refused fit record is tried again every second (``RETRY_S``): a traceback each time would bury the
+    log of a long full disk."""
+    caplog.set_level(logging.INFO, logger="teacher_service.store")
+    _create(http, "lasting", kuka_space)
+    tasks = _draw(http, "lasting", 4).json()["tasks"]
+    refusing = RefusingCommits(service.store._db)
+    service.on_loop(lambda: setattr(service.store, "_db", refusing))
+    for task in tasks[:3]:
+        _refused(http.post("/curricula/lasting/results", json=_results([task])), "database or disk is full")
+    failures = [record for record in caplog.records if record.getMessage().startswith("commit of")]
+    assert len(failures) == 1 and failures[0].exc_info, "each failed commit logged its traceback again"
+
+    refusing.refusing = False
+    assert http.post("/curricula/lasting/results", json=_results(tasks)).json()["accepted"] == 4
+    assert caplog.messages.count("writes land again (they had failed: database or disk is full)") == 1
+
+
 def test_every_write_of_a_failed_group_is_answered(service: InProcessService, kuka_space: list[dict[str, Any]]) -> None:
     """Writes that arrive together share one commit; when it fails, each of them gets its 503."""
     headers = {"Authorization": f"Bearer {TOKEN}"}
