@@ -1,9 +1,9 @@
 """A screen's report: each arm's runs read from their final evaluations, the screen's test and the rliable figures.
 
-A screen (docs/results/student.md) scores every run's final policy on one fixed set of hardest-point episodes
-and calls a run good at ``--threshold`` or more. This reads those evaluation files (plain or xz-compressed
-JSON, as ``kuka-curriculum evaluate`` and the screen script write them), checks that every run played the same
-episodes (the same count and first seed), and reports per arm:
+A screen (docs/results/student.md) scores every run's policy (its final one, or its validated one as a second
+arm) on one fixed set of hardest-point episodes and calls a run good at ``--threshold`` or more. This reads
+those evaluation files (plain or xz-compressed JSON, as ``kuka-curriculum evaluate`` and the screen script write
+them), checks that every run played the same episodes (the same count and first seed), and reports per arm:
 
 - the screen's test: the good runs against the baseline arm's, Fisher's exact test, one-sided;
 - the rliable figures (``learner.experiments.run_statistics``): IQM and mean with stratified-bootstrap
@@ -129,8 +129,8 @@ def markdown(report: Mapping[str, Any]) -> str:
     lines = [
         f"# Screen report: {', '.join(report['runs'])}",
         "",
-        f"Each run's final policy on {report['episodes']} hardest-point episodes from seed "
-        f"{report['first_episode_seed']}; a run is good at {report['threshold']:.0%} or more.",
+        f"Each run's policy (the one its evaluation file played) on {report['episodes']} hardest-point episodes "
+        f"from seed {report['first_episode_seed']}; a run is good at {report['threshold']:.0%} or more.",
         "",
         f"| Arm | Good runs | Fisher's exact test against {report['baseline']}, one-sided |",
         "|---|---|---|",
