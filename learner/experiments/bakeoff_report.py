@@ -23,6 +23,7 @@ from learner.core.config import TrainConfig
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import EvaluationResult
 from learner.evaluation.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
+from learner.evaluation.selection import VALIDATION_EPISODES
 from learner.evaluation.stats import CONFIDENCE, Interval
 from learner.experiments.bakeoff_runs import learning_curve
 from learner.experiments.bakeoff_statistics import (
@@ -158,7 +159,16 @@ def seed_scores(results: Sequence[TeacherResult]) -> dict[str, list[float]]:
     return {result.teacher: result.seed_success_rates for result in results}
 
 
-def run_statistics_markdown(statistics: RunStatistics, baseline: str) -> list[str]:
+def scored_policy(settings: dict[str, Any]) -> str:
+    """What a run's score is of: its last checkpoint, or with ``policy_choice`` validated the checkpoint
+    chosen on validation episodes (``learner.evaluation.selection``); settings stored before the choice
+    existed are final."""
+    if settings.get("policy_choice", "final") == "validated":
+        return f"validated policy (the best of its late checkpoints on {VALIDATION_EPISODES} validation episodes)"
+    return "final policy"
+
+
+def run_statistics_markdown(statistics: RunStatistics, baseline: str, policy: str = "final policy") -> list[str]:
     """The section on what the seeds can tell apart: the run statistics' table, what its figures mean, and the
     performance profile; ``baseline`` is the one asked for, which ``statistics`` lacks when it was not run."""
     labels = {teacher: f"{teacher_label(teacher)} (`{teacher}`)" for teacher in statistics.arms}
@@ -176,7 +186,7 @@ def run_statistics_markdown(statistics: RunStatistics, baseline: str) -> list[st
     return [
         "## Over seeds, robustly: what the runs can tell apart",
         "",
-        "Each seed's score is its final policy's success rate on the hardest task (the table above). Computed "
+        f"Each seed's score is the success rate of its {policy} on the hardest task (the table above). Computed "
         "with rliable (Agarwal et al., NeurIPS 2021), which showed that a few seeds and a point estimate "
         "mis-rank methods.",
         "",
@@ -287,8 +297,8 @@ def results_markdown(
         "# Teacher bake-off on the hardest task",
         "",
         f"Each teacher trained {seeds} for {settings['total_steps']:_} environment "
-        f"steps with the same settings ({trained}) and hyperparameters. Each final policy then played "
-        f"{episodes} deterministic episodes on {hardest} (episode seeds {seed} to {seed + episodes - 1}, "
+        f"steps with the same settings ({trained}) and hyperparameters. Each run's {scored_policy(settings)} then "
+        f"played {episodes} deterministic episodes on {hardest} (episode seeds {seed} to {seed + episodes - 1}, "
         "the same for every run).",
         *(
             [f"Teachers registered with these parameters on top of their own defaults: {registered}."]
@@ -320,7 +330,7 @@ def results_markdown(
         f"{settings['curve_every']} iterations), pooled, reach it; a seed that never does counts as slowest. "
         + curve_seeds_note(results),
         "",
-        *run_statistics_markdown(statistics, baseline),
+        *run_statistics_markdown(statistics, baseline, scored_policy(settings)),
         "## Pooled episodes: evaluation noise",
         "",
         f"| Teacher | Mean return ({CONFIDENCE:.0%} CI) | Success rate (Wilson {CONFIDENCE:.0%}) | Seeds "
@@ -486,9 +496,9 @@ def recompute_run_statistics(
     section = run_statistics_markdown(statistics, baseline)
     section[0] = f"# Run statistics of the bake-off in {results_json.parent.name}"
     section[2] = (
-        f"Recomputed from its `{results_json.name}`. Each seed's score is its final policy's success rate on the "
-        "hardest task. Computed with rliable (Agarwal et al., NeurIPS 2021), which showed that a few seeds and a "
-        "point estimate mis-rank methods."
+        f"Recomputed from its `{results_json.name}`. Each seed's score is the success rate of its "
+        f"{scored_policy(data.get('settings', {}))} on the hardest task. Computed with rliable (Agarwal et al., "
+        "NeurIPS 2021), which showed that a few seeds and a point estimate mis-rank methods."
     )
     (out / RUN_STATISTICS_MARKDOWN).write_text("\n".join(section), encoding="utf-8")
     plot_profile(out / PERFORMANCE_PROFILE, scores, statistics)

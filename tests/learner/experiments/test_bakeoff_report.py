@@ -56,6 +56,17 @@ def test_a_report_over_the_level_kinds_names_them_from_the_one_registry(tmp_path
     assert teacher_label("a-kind-without-a-label") == "a-kind-without-a-label"
 
 
+@pytest.mark.parametrize(("choice", "policy"), [("final", "final policy"), ("validated", "validated policy (the best")])
+def test_the_report_names_the_policy_its_runs_were_scored_by(tmp_path, choice, policy):
+    """A bake-off with ``--policy-choice validated`` scores each run's chosen checkpoint, not its last."""
+    results = teacher_results(tmp_path)
+    statistics = seed_statistics(seed_scores(results), reps=REPS)
+    report = results_markdown(results, SETTINGS | {"policy_choice": choice}, episodes=10, seed=0, statistics=statistics)
+    assert f"Each run's {policy}" in report and f"the success rate of its {policy}" in report
+    other = "validated policy" if choice == "final" else "final policy"
+    assert other not in report
+
+
 def test_the_report_writes_the_run_statistics_beside_every_earlier_figure(tmp_path):
     results = teacher_results(tmp_path)
     write_reports(tmp_path, results, SETTINGS, episodes=10, seed=0, reps=REPS)
