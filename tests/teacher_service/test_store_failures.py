@@ -30,16 +30,20 @@ TOKEN = "store-failure-test-token"
 
 class FailingConnection:
     """The store's SQLite connection, except that the next statement starting with ``prefix``
-    raises ``failure`` instead of running (once)."""
+    raises ``failure`` instead of running: once, or with ``lasting`` every time until ``failure``
+    is set to None."""
 
-    def __init__(self, db: sqlite3.Connection, prefix: str, failure: BaseException) -> None:
+    def __init__(self, db: sqlite3.Connection, prefix: str, failure: BaseException, lasting: bool = False) -> None:
         self.db = db
         self.prefix = prefix
         self.failure: BaseException | None = failure
+        self.lasting = lasting
 
     def _check(self, sql: str) -> None:
         if self.failure is not None and sql.startswith(self.prefix):
-            failure, self.failure = self.failure, None
+            failure = self.failure
+            if not self.lasting:
+                self.failure = None
             raise failure
 
     def execute(self, sql: str, *args: Any) -> sqlite3.Cursor:
@@ -179,19 +183,6 @@ def test_an_exception_that_is_not_sqlites_fails_the_writes_and_the_next_ones_wor
     assert _stored_results(service.store.path, "odd") == {task["task_id"] for task in tasks}
 
 
-class RefusingCommits(FailingConnection):
-    """The store's connection, refusing every COMMIT while ``refusing``, as a disk that stays full refuses
-    the journal's writes."""
-
-    def __init__(self, db: sqlite3.Connection) -> None:
-        super().__init__(db, "COMMIT", sqlite3.OperationalError("database or disk is full"))
-        self.refusing = True
-
-    def _check(self, sql: str) -> None:
-        if self.refusing and sql.startswith(self.prefix):
-            raise sqlite3.OperationalError("database or disk is full")
-
-
 def test_a_failure_that_lasts_is_logged_when_it_starts_and_when_it_ends_not_at_every_write(
     service: InProcessService, http: httpx.Client, kuka_space: list[dict[str, Any]], caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -200,14 +191,15 @@ def test_a_failure_that_lasts_is_logged_when_it_starts_and_when_it_ends_not_at_e
     caplog.set_level(logging.INFO, logger="teacher_service.store")
     _create(http, "lasting", kuka_space)
     tasks = _draw(http, "lasting", 4).json()["tasks"]
-    refusing = RefusingCommits(service.store._db)
+    full = sqlite3.OperationalError("database or disk is full")
+    refusing = FailingConnection(service.store._db, "COMMIT", full, lasting=True)  # as a disk that stays full
     service.on_loop(lambda: setattr(service.store, "_db", refusing))
     for task in tasks[:3]:
         _refused(http.post("/curricula/lasting/results", json=_results([task])), "database or disk is full")
     failures = [record for record in caplog.records if record.getMessage().startswith("commit of")]
     assert len(failures) == 1 and failures[0].exc_info, "each failed commit logged its traceback again"
 
-    refusing.refusing = False
+    refusing.failure = None
     assert http.post("/curricula/lasting/results", json=_results(tasks)).json()["accepted"] == 4
     assert caplog.messages.count("writes land again (they had failed: database or disk is full)") == 1
 
