@@ -46,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script:
 from common.client.task_space import TaskSpace  # noqa: E402
 from common.kuka.task_space import KUKA_TASK_SPACE  # noqa: E402
 from learner.core.config import TrainConfig  # noqa: E402
+from learner.core.figure_file import save_png  # noqa: E402
 from learner.experiments.bakeoff_runs import RUNS_DIR  # noqa: E402
 from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, read_json, unpacked  # noqa: E402
 from learner.job.teacher_process import DATABASE_FILE  # noqa: E402
@@ -284,7 +285,7 @@ def plot_runs(runs: Sequence[RunData], out: Path) -> Path:
     for axes_ in axes[-1]:
         axes_.set_xlabel("environment steps")
     path = out / "curriculum_by_run.png"
-    figure.savefig(path, dpi=90)
+    save_png(figure, path, dpi=90)
     return path
 
 
@@ -304,7 +305,7 @@ def plot_placement(runs: Sequence[RunData], out: Path) -> Path:
     panels[0].set_ylabel("final hardest-task success")
     panels[0].legend(loc="lower left", fontsize="small")
     path = out / "success_by_placement.png"
-    figure.savefig(path, dpi=90)
+    save_png(figure, path, dpi=90)
     return path
 
 

@@ -100,6 +100,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script:
 from bench.provenance import commit, machine  # noqa: E402
 from common.client.task_space import TaskSpace  # noqa: E402
 from learner.core.checkpoint import latest_checkpoint, load_checkpoint  # noqa: E402
+from learner.core.figure_file import save_png  # noqa: E402
 from learner.experiments.run_archive import EVALUATION_FILE, exists, metrics_records, unpacked  # noqa: E402
 from learner.job.teacher_process import DATABASE_FILE  # noqa: E402
 from teacher_service.curriculum_spec import stored_spec  # noqa: E402
@@ -713,7 +714,7 @@ def plot(analysis: Analysis, out: Path) -> Path:
     )
     bottom.grid(alpha=0.3)
     path = out / f"{run.name}.png"
-    figure.savefig(path, dpi=80)
+    save_png(figure, path, dpi=80)
     return path
 
 

@@ -66,6 +66,7 @@ from bench.provenance import commit, machine  # noqa: E402
 from common.families.base import HELD_OUT_FIRST_SEED  # noqa: E402
 from common.levels import GAMUT_ENV_ID, LEVEL_ENV_IDS  # noqa: E402
 from learner.core.config import TrainConfig  # noqa: E402
+from learner.core.figure_file import save_png  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -631,7 +632,7 @@ def plot_survival(survival: Mapping[str, Mapping[str, Any]], path: Path, title: 
     )
     axes.grid(alpha=0.3)
     axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize="small")
-    figure.savefig(path, dpi=100)
+    save_png(figure, path, dpi=100)
 
 
 def plot_curves(runs: Mapping[str, Sequence[Mapping[str, Any]]], path: Path, title: str) -> None:
@@ -652,7 +653,7 @@ def plot_curves(runs: Mapping[str, Sequence[Mapping[str, Any]]], path: Path, tit
     axes.set_title(title)
     axes.grid(alpha=0.3)
     axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize="small")
-    figure.savefig(path, dpi=100)
+    save_png(figure, path, dpi=100)
 
 
 def _interval(cell: Mapping[str, Any] | None, percent: bool = True) -> str:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from common.kuka.diagnostics import EpisodeDiagnostics
+from learner.core.figure_file import save_png
 from learner.evaluation.stats import CONFIDENCE, Interval, wilson_interval
 
 BAND_EDGES = (0.0, 0.02, 0.04)
@@ -118,4 +119,4 @@ def plot_bands(path: Path, rows: Sequence[tuple[str, Sequence[tuple[EpisodeDiagn
     axes.set_title("Final evaluation: success by how far the block lay beyond the arm's x reach")
     axes.grid(axis="y", alpha=0.3)
     axes.legend(loc="center left", bbox_to_anchor=(1.01, 0.5))
-    figure.savefig(path, dpi=110)
+    save_png(figure, path, dpi=110)

@@ -20,6 +20,7 @@ from common.kuka.arm import TARGET_X_RANGE
 from common.kuka.diagnostics import EpisodeDiagnostics
 from common.levels import DEFAULT_LEVELS
 from learner.core.config import TrainConfig
+from learner.core.figure_file import save_png
 from learner.core.json_file import write_json
 from learner.evaluation.checkpoint_evaluation import EvaluationResult
 from learner.evaluation.episode_diagnostics import band_table, failures_outside, plot_bands, success_by_band
@@ -411,7 +412,7 @@ def plot_learning_curves(path: Path, results: Sequence[TeacherResult]) -> None:
             axes.set_ylabel("hardest-task success")
         axes.grid(alpha=0.3)
     figure.suptitle("Hardest-task success during training (in-run evaluations)")
-    figure.savefig(path, dpi=110)
+    save_png(figure, path, dpi=110)
 
 
 def write_reports(

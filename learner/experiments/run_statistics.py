@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from learner.commands.arguments import int_between
+from learner.core.figure_file import save_png
 from learner.evaluation.stats import CONFIDENCE, Interval, wilson_interval
 
 THRESHOLD = 0.8
@@ -239,7 +240,7 @@ def plot_performance_profile(
     )
     axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize="small")
     axes.set_title(title or f"Performance profiles ({confidence:.0%} bootstrap bands over runs)", fontsize="medium")
-    figure.savefig(path, dpi=110)
+    save_png(figure, path, dpi=110)
 
 
 def _percent(interval: Interval) -> str:

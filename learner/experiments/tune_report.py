@@ -20,6 +20,7 @@ from typing import Any
 from ray.tune import Callback
 
 from learner.commands.config_file import NOTES_KEY
+from learner.core.figure_file import save_png
 from learner.core.json_file import write_json
 from learner.experiments.run_archive import metrics_records
 from learner.experiments.tune_settings import EXPERIMENT, METRICS, RUNS_DIR, TuneSettings
@@ -196,7 +197,7 @@ def _plot(path: Path, entries: list[dict[str, Any]], metric: str, best: str | No
     if any(entry["curve"] for entry in entries):
         axes.legend(fontsize="small")
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    save_png(figure, path, dpi=100)
     plt.close(figure)
 
 
