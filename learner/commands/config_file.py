@@ -76,25 +76,37 @@ class ConfigFile:
         )
 
 
+SHOWN_CHARACTERS = 120
+"""How much of a settings file's name an error repeats: the name is the user's text, of any length."""
+
+
+def shortened(text: str) -> str:
+    """``text`` as an error shows it, cut to ``SHOWN_CHARACTERS`` with an ellipsis."""
+    return text if len(text) <= SHOWN_CHARACTERS else text[: SHOWN_CHARACTERS - 1] + "…"
+
+
 def read_config_file(path: Path) -> ConfigFile:
     """The file's settings, checked by name and built into a ``TrainConfig`` once; ``ValueError`` says what is wrong."""
     path = Path(path)
+    shown = shortened(str(path))
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"no settings file {shown}, and no recipe of that name: {', '.join(RECIPES)}") from None
     except OSError as error:
-        raise ValueError(f"cannot read the settings file {path}: {error.strerror}") from None
+        raise ValueError(f"cannot read the settings file {shown}: {error.strerror}") from None
     except json.JSONDecodeError as error:
-        raise ValueError(f"the settings file {path} is not valid JSON: {error}") from None
+        raise ValueError(f"the settings file {shown} is not valid JSON: {error}") from None
     if not isinstance(data, dict):
-        raise ValueError(f"the settings file {path} must hold a JSON object")
+        raise ValueError(f"the settings file {shown} must hold a JSON object")
     unknown = sorted(set(data) - set(KNOWN_KEYS))
     if unknown:
         raise ValueError(
-            f"the settings file {path} has unknown key(s) {', '.join(unknown)}; known: {', '.join(KNOWN_KEYS)}"
+            f"the settings file {shown} has unknown key(s) {', '.join(unknown)}; known: {', '.join(KNOWN_KEYS)}"
         )
     for key in ("ppo", "teacher_params"):
         if not isinstance(data.get(key, {}), dict):
-            raise ValueError(f"the settings file {path}: {key} must be an object of name to value")
+            raise ValueError(f"the settings file {shown}: {key} must be an object of name to value")
     config_file = ConfigFile(
         settings={key: data[key] for key in SETTINGS if key in data},
         ppo=dict(data.get("ppo", {})),
@@ -103,7 +115,7 @@ def read_config_file(path: Path) -> ConfigFile:
     try:
         config_file.applied_to(TrainConfig())
     except (TypeError, ValueError) as error:
-        raise ValueError(f"the settings file {path}: {error}") from None
+        raise ValueError(f"the settings file {shown}: {error}") from None
     return config_file
 
 
@@ -138,7 +150,7 @@ class BakeoffConfigAction(argparse.Action):
         namespace.ppo = [*ppo.items(), *(namespace.ppo or [])]
         kind = config_file.teacher
         if config_file.teacher_params and kind is None:
-            parser.error(f"the settings file {path} has teacher_params but no teacher they belong to")
+            parser.error(f"the settings file {shortened(str(path))} has teacher_params but no teacher they belong to")
         teacher_params = [(f"{kind}.{name}", value) for name, value in config_file.teacher_params.items()]
         namespace.teacher_params = [*teacher_params, *(namespace.teacher_params or [])]
         setattr(namespace, self.dest, path)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from learner.commands import train
-from learner.commands.config_file import RECIPE_DIR, RECIPES, config_path, read_config_file
+from learner.commands.config_file import RECIPE_DIR, RECIPES, SHOWN_CHARACTERS, config_path, read_config_file
 from learner.core.config import TrainConfig
 from learner.experiments import bakeoff
 
@@ -68,8 +68,19 @@ def test_a_name_that_is_no_recipe_is_a_path_and_a_missing_file_is_refused_by_nam
 
     assert config_path("hard-grasp-v1").parent == RECIPE_DIR
     assert config_path("hard-grasp") == Path("hard-grasp")
-    assert main(["train", "--config", str(tmp_path / "nothing.json"), "--run-dir", str(tmp_path / "run")]) == 2
-    assert "cannot read the settings file" in capsys.readouterr().err
+    assert main(["train", "--config", "hard-grasp-v2", "--run-dir", str(tmp_path / "run")]) == 2
+    assert "no settings file hard-grasp-v2, and no recipe of that name: hard-grasp-v1" in capsys.readouterr().err
+    assert main(["train", "--config", str(tmp_path), "--run-dir", str(tmp_path / "run")]) == 2
+    assert f"cannot read the settings file {tmp_path}: Is a directory" in capsys.readouterr().err
+
+
+def test_an_error_repeats_a_long_name_cut_short(tmp_path, capsys):
+    from kuka_curriculum import main
+
+    assert main(["train", "--config", "x" * 5000, "--run-dir", str(tmp_path / "run")]) == 2
+    error = capsys.readouterr().err
+    assert "x" * (SHOWN_CHARACTERS - 1) + "…" in error
+    assert "x" * SHOWN_CHARACTERS not in error
 
 
 @pytest.mark.parametrize("name", RECIPES)
