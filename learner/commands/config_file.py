@@ -99,11 +99,9 @@ def read_config_file(path: Path) -> ConfigFile:
         raise ValueError(f"the settings file {shown} is not valid JSON: {error}") from None
     if not isinstance(data, dict):
         raise ValueError(f"the settings file {shown} must hold a JSON object")
-    unknown = sorted(set(data) - set(KNOWN_KEYS))
+    unknown = shortened(", ".join(sorted(set(data) - set(KNOWN_KEYS))))
     if unknown:
-        raise ValueError(
-            f"the settings file {shown} has unknown key(s) {', '.join(unknown)}; known: {', '.join(KNOWN_KEYS)}"
-        )
+        raise ValueError(f"the settings file {shown} has unknown key(s) {unknown}; known: {', '.join(KNOWN_KEYS)}")
     for key in ("ppo", "teacher_params"):
         if not isinstance(data.get(key, {}), dict):
             raise ValueError(f"the settings file {shown}: {key} must be an object of name to value")

@@ -74,13 +74,19 @@ def test_a_name_that_is_no_recipe_is_a_path_and_a_missing_file_is_refused_by_nam
     assert f"cannot read the settings file {tmp_path}: Is a directory" in capsys.readouterr().err
 
 
-def test_an_error_repeats_a_long_name_cut_short(tmp_path, capsys):
+def test_an_error_repeats_a_long_name_or_list_of_keys_cut_short(tmp_path, capsys):
     from kuka_curriculum import main
 
     assert main(["train", "--config", "x" * 5000, "--run-dir", str(tmp_path / "run")]) == 2
     error = capsys.readouterr().err
     assert "x" * (SHOWN_CHARACTERS - 1) + "…" in error
     assert "x" * SHOWN_CHARACTERS not in error
+    many_keys = tmp_path / "many-keys.json"
+    many_keys.write_text(json.dumps({f"key{index:04d}": 1 for index in range(1000)}), encoding="utf-8")
+    assert main(["train", "--config", str(many_keys), "--run-dir", str(tmp_path / "run")]) == 2
+    error = capsys.readouterr().err
+    assert "unknown key(s) key0000, key0001" in error
+    assert "key0999" not in error
 
 
 @pytest.mark.parametrize("name", RECIPES)
