@@ -169,9 +169,19 @@ def scored_policy(settings: dict[str, Any]) -> str:
     return "final policy"
 
 
-def run_statistics_markdown(statistics: RunStatistics, baseline: str, policy: str = "final policy") -> list[str]:
+def scores_sentence(policy: str, where: str = "") -> str:
+    """What the run statistics score each seed by, ``policy`` as ``scored_policy`` names it, and where its
+    scores stand (``where``, after the task)."""
+    return (
+        f"Each seed's score is the success rate of its {policy} on the hardest task{where}. Computed with rliable "
+        "(Agarwal et al., NeurIPS 2021), which showed that a few seeds and a point estimate mis-rank methods."
+    )
+
+
+def run_statistics_markdown(statistics: RunStatistics, baseline: str, policy: str) -> list[str]:
     """The section on what the seeds can tell apart: the run statistics' table, what its figures mean, and the
-    performance profile; ``baseline`` is the one asked for, which ``statistics`` lacks when it was not run."""
+    performance profile; ``baseline`` is the one asked for, which ``statistics`` lacks when it was not run, and
+    ``policy`` the one each seed was scored by (``scored_policy``)."""
     labels = {teacher: f"{teacher_label(teacher)} (`{teacher}`)" for teacher in statistics.arms}
     if statistics.baseline is None:
         improvement = (
@@ -187,9 +197,7 @@ def run_statistics_markdown(statistics: RunStatistics, baseline: str, policy: st
     return [
         "## Over seeds, robustly: what the runs can tell apart",
         "",
-        f"Each seed's score is the success rate of its {policy} on the hardest task (the table above). Computed "
-        "with rliable (Agarwal et al., NeurIPS 2021), which showed that a few seeds and a point estimate "
-        "mis-rank methods.",
+        scores_sentence(policy, " (the table above)"),
         "",
         *statistics_table(statistics, labels),
         "",
@@ -494,13 +502,10 @@ def recompute_run_statistics(
     out = results_json.parent if out is None else out
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / RUN_STATISTICS_JSON, statistics.to_dict())
-    section = run_statistics_markdown(statistics, baseline)
+    policy = scored_policy(data.get("settings", {}))
+    section = run_statistics_markdown(statistics, baseline, policy)
     section[0] = f"# Run statistics of the bake-off in {results_json.parent.name}"
-    section[2] = (
-        f"Recomputed from its `{results_json.name}`. Each seed's score is the success rate of its "
-        f"{scored_policy(data.get('settings', {}))} on the hardest task. Computed with rliable (Agarwal et al., "
-        "NeurIPS 2021), which showed that a few seeds and a point estimate mis-rank methods."
-    )
+    section[2] = f"Recomputed from its `{results_json.name}`. {scores_sentence(policy)}"
     (out / RUN_STATISTICS_MARKDOWN).write_text("\n".join(section), encoding="utf-8")
     plot_profile(out / PERFORMANCE_PROFILE, scores, statistics)
     return statistics
