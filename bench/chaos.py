@@ -363,25 +363,27 @@ def now_s_past(fault: Fault, seconds: float) -> bool:
 
 
 def stuck_at_start(stack: Stack, artifacts: Path | None) -> str:
-    """What a stack that never trained was doing: each container's state, Ray's and the tail of every log.
+    """What a stack that never trained was doing: the tail of every log, Ray's view and each container's state.
 
-    The whole compose log goes to ``artifacts`` too; the tail is in the error so that a CI log shows it.
+    The whole compose log goes to ``artifacts`` too. The tail is in the error so that a CI log shows it, and
+    the learner's log, Ray's view and the containers' states come last: a CI page keeps only an error's end.
     """
-    states = stack.states()
-    lines = [
-        f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
-        f"health {state['health']})"
-        for state in sorted(states.values(), key=lambda state: state["name"])
-    ]
     if artifacts:
         stack.save_log(artifacts)
+    lines = []
+    for service in ("ray-worker", "teacher", "ray-head", "learner"):
+        tail = stack.compose("logs", "--no-color", "--timestamps", "--tail", str(STUCK_LOG_LINES), service)
+        lines += [f"--- the last {STUCK_LOG_LINES} lines of {service}'s log:", tail.rstrip()]
     for head in stack.containers("ray-head"):
         # The cluster's own view: which nodes it counts alive, and any actor still waiting for a place.
         status = run(["docker", "exec", head, "ray", "status"], timeout=60, check=False)
         lines += ["--- `ray status` on the head:", status.rstrip()]
-    for service in ("learner", "ray-head", "ray-worker", "teacher"):
-        tail = stack.compose("logs", "--no-color", "--timestamps", "--tail", str(STUCK_LOG_LINES), service)
-        lines += [f"--- the last {STUCK_LOG_LINES} lines of {service}'s log:", tail.rstrip()]
+    lines.append("--- the containers:")
+    lines += [
+        f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
+        f"health {state['health']})"
+        for state in sorted(stack.states().values(), key=lambda state: state["name"])
+    ]
     return "\n".join(lines)
 
 

@@ -94,6 +94,15 @@ def wait_for(predicate: Callable[[], Any], timeout_s: float, what: str, interval
     raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
+def wait_for_training(stack: chaos.Stack, predicate: Callable[[], Any], what: str, artifacts: Path) -> Any:
+    """``wait_for`` over ``STACK_READY_S`` for a run's first progress; a stack that never gets there fails
+    with what it was doing (every log's tail, the learner's last), its whole log saved in ``artifacts``."""
+    try:
+        return wait_for(predicate, STACK_READY_S, what)
+    except AssertionError as error:
+        raise AssertionError(f"{error}\n{chaos.stuck_at_start(stack, artifacts)}") from None
+
+
 def port_is_free(port: int) -> bool:
     with socket.socket() as probe:
         return probe.connect_ex(("127.0.0.1", port)) != 0

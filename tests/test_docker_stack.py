@@ -30,12 +30,12 @@ from tests.docker_stack import (
     FIGURES,
     PUBLISHED_PORTS,
     ROOT,
-    STACK_READY_S,
     TEACHER_URL,
     TOKEN,
     SharedStack,
     run,
     wait_for,
+    wait_for_training,
 )
 
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(1500)]
@@ -166,9 +166,11 @@ def teacher_kill_run(stack: SharedStack) -> TeacherKillRun:
     up_at, up_at_unix = time.monotonic(), time.time()
     stack.start_plain_run(run_settings(KC_TEACHER_TOKEN=TOKEN, SEED=0, TOTAL_STEPS=TEACHER_RUN_STEPS))
     learner = container(stack, "learner")
-    wait_for(lambda: results_received(observed.run_name), STACK_READY_S, "the teacher's first episode result")
+    wait_for_training(
+        stack, lambda: results_received(observed.run_name), "the teacher's first episode result", ARTIFACTS
+    )
     FIGURES["up_to_first_result_seconds"] = time.monotonic() - up_at
-    wait_for(lambda: metrics(stack, observed.run_name), STACK_READY_S, "the learner's first iteration")
+    wait_for_training(stack, lambda: metrics(stack, observed.run_name), "the learner's first iteration", ARTIFACTS)
     workers = stack.containers("ray-worker")
     observed.actors_per_container = {
         **{f"ray-worker {index}": rollout_actors_hosted(worker, up_at_unix) for index, worker in enumerate(workers)},
@@ -298,7 +300,7 @@ def no_env_run(teacher_kill_run: TeacherKillRun) -> NoEnvRun:
     stack = teacher_kill_run.stack
     stack.start_plain_run({}, shell=run_settings(SEED=1, TOTAL_STEPS=WORKER_RUN_STEPS))
     learner = container(stack, "learner")
-    wait_for(lambda: metrics(stack, "alp-gmm-seed1"), STACK_READY_S, "the second run's first iteration")
+    wait_for_training(stack, lambda: metrics(stack, "alp-gmm-seed1"), "the second run's first iteration", ARTIFACTS)
     victim = stack.containers("ray-worker")[0]
     docker("kill", victim)
 
