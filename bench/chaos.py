@@ -367,23 +367,27 @@ def stuck_at_start(stack: Stack, artifacts: Path | None) -> str:
 
     The whole compose log goes to ``artifacts`` too. The tail is in the error so that a CI log shows it, and
     the learner's log, Ray's view and the containers' states come last: a CI page keeps only an error's end.
+    A stack whose state cannot be read says so: the caller's error, not the report's, is the one to raise.
     """
-    if artifacts:
-        stack.save_log(artifacts)
-    lines = []
-    for service in ("ray-worker", "teacher", "ray-head", "learner"):
-        tail = stack.compose("logs", "--no-color", "--timestamps", "--tail", str(STUCK_LOG_LINES), service)
-        lines += [f"--- the last {STUCK_LOG_LINES} lines of {service}'s log:", tail.rstrip()]
-    for head in stack.containers("ray-head"):
-        # The cluster's own view: which nodes it counts alive, and any actor still waiting for a place.
-        status = run(["docker", "exec", head, "ray", "status"], timeout=60, check=False)
-        lines += ["--- `ray status` on the head:", status.rstrip()]
-    lines.append("--- the containers:")
-    lines += [
-        f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
-        f"health {state['health']})"
-        for state in sorted(stack.states().values(), key=lambda state: state["name"])
-    ]
+    try:
+        if artifacts:
+            stack.save_log(artifacts)
+        lines = []
+        for service in ("ray-worker", "teacher", "ray-head", "learner"):
+            tail = stack.compose("logs", "--no-color", "--timestamps", "--tail", str(STUCK_LOG_LINES), service)
+            lines += [f"--- the last {STUCK_LOG_LINES} lines of {service}'s log:", tail.rstrip()]
+        for head in stack.containers("ray-head"):
+            # The cluster's own view: which nodes it counts alive, and any actor still waiting for a place.
+            status = run(["docker", "exec", head, "ray", "status"], timeout=60, check=False)
+            lines += ["--- `ray status` on the head:", status.rstrip()]
+        lines.append("--- the containers:")
+        lines += [
+            f"{state['name']}: {state['status']} (exit {state['exit_code']}, {state['restarts']} restarts, "
+            f"health {state['health']})"
+            for state in sorted(stack.states().values(), key=lambda state: state["name"])
+        ]
+    except Exception as error:  # any failure to read the stack is reported: the caller has the error to raise
+        return f"(its state could not be read: {type(error).__name__}: {error})"
     return "\n".join(lines)
 
 
@@ -873,10 +877,7 @@ def run_chaos(stack: Stack, args: argparse.Namespace, argv: list[str]) -> dict[s
         deadline = time.time() + args.start_timeout
         while not metrics(stack, run_name):
             if time.time() > deadline:
-                try:
-                    detail = stuck_at_start(stack, args.artifacts)
-                except Exception as error:  # the stack's own failure is the error to raise, not the report's
-                    detail = f"(its state could not be read: {type(error).__name__}: {error})"
+                detail = stuck_at_start(stack, args.artifacts)
                 waited = f"{args.start_timeout:.0f} s"
                 raise RuntimeError(f"the learner logged no iteration within {waited} of `up`\n{detail}")
             time.sleep(2.0)
