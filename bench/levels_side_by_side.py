@@ -722,6 +722,7 @@ def results_table(results: Mapping[str, Any]) -> str:
             rows,
         ),
     ]
+    lines += tier_table(results["runs"])
     if best:
         lines += [
             "",
@@ -752,6 +753,30 @@ def results_table(results: Mapping[str, Any]) -> str:
             *markdown_table(["kind", "steps/s per round", "median", "vs no curriculum [min, max]"], speeds),
         ]
     return "\n".join(lines) + "\n"
+
+
+def tier_table(runs: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """Each arm's held-out success by gamut tier, the mean over its runs: a score over all levels does not say
+    which rooms a teacher's choice of levels helped with. Empty off the gamut."""
+    from common.levels.gamut import TIERS
+
+    by_tier = {
+        kind: [run["success_by_tier"] for run in found if run.get("success_by_tier")] for kind, found in runs.items()
+    }
+    rows = [
+        [kind, *(f"{100.0 * value:.1f}" for value in np.mean(tiers, axis=0))]
+        for kind, tiers in by_tier.items()
+        if tiers
+    ]
+    if not rows:
+        return []
+    headers = ["arm", *(f"{tier.size}x{tier.size} {tier.barrier}" for tier in TIERS)]
+    return [
+        "",
+        "Held-out success by tier (room side and barrier), % over the arm's runs:",
+        "",
+        *markdown_table(headers, rows),
+    ]
 
 
 def measure_throughput(args: argparse.Namespace) -> None:

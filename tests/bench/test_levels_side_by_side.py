@@ -22,6 +22,7 @@ from bench.levels_side_by_side import (
     parse_args,
     run_config,
     take_off_step,
+    tier_table,
 )
 from teacher_service.teachers import make_teacher
 
@@ -110,6 +111,19 @@ def test_kaplan_meier_counts_runs_that_never_take_off_as_censored_at_the_budget(
     assert kaplan_meier([None] * 3, censored_at=1000.0)["median_take_off_step"] is None
     ties = kaplan_meier([50.0, 50.0, 80.0], censored_at=100.0)
     assert ties["survival"] == pytest.approx([1.0, 1.0 / 3.0, 0.0])
+
+
+def test_the_tier_table_averages_each_arms_runs_tier_by_tier() -> None:
+    runs = {
+        "plr": [{"success_by_tier": [1.0, 0.5] + [0.0] * 6}, {"success_by_tier": [0.5, 0.5] + [1.0] * 6}],
+        "random": [{"success_by_tier": [0.25] * 8}],
+    }
+    table = tier_table(runs)
+    header = next(line for line in table if line.startswith("| arm"))
+    assert header.split(" | ")[1:3] == ["7x7 none", "7x7 gap"] and "14x14 locked" in header
+    assert "| plr | 75.0 | 50.0 | 50.0 | 50.0 | 50.0 | 50.0 | 50.0 | 50.0 |" in table
+    assert "| random | 25.0 | 25.0 | 25.0 | 25.0 | 25.0 | 25.0 | 25.0 | 25.0 |" in table
+    assert tier_table({"plr": [{"success": 0.5}]}) == [], "off the gamut a run has no tiers"
 
 
 def test_the_driver_runs_and_reports_on_a_tiny_budget(tmp_path: Path, ray_cluster: str) -> None:
